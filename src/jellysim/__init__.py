@@ -1,0 +1,33 @@
+"""jellysim: simulate and animate jellyfish after Hirato & Kawaguchi.
+
+Python API (the same powers as the command line)::
+
+    import jellysim
+    scene = jellysim.load_scene("brown-jelly", {"tentacles.youngs_modulus": 2.4e5})
+    result = jellysim.run(scene, out="out/stiff", force=True)
+    with jellysim.open_result("out/stiff") as r:
+        tip_x = r.tentacle_positions[:, 0, -1, 0]
+"""
+
+from jellysim.config import Scene, load_scene, scene_to_toml
+from jellysim.errors import InputError, JellysimError, SimulationUnstable
+from jellysim.io.result import Result, open_result
+from jellysim.simulation import Simulation, run
+from jellysim.species import preset_names
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "InputError",
+    "JellysimError",
+    "Result",
+    "Scene",
+    "Simulation",
+    "SimulationUnstable",
+    "__version__",
+    "load_scene",
+    "open_result",
+    "preset_names",
+    "run",
+    "scene_to_toml",
+]

@@ -1,0 +1,267 @@
+"""Reading, overriding, validating and writing scenes.
+
+A scene is built from a preset name or a TOML file, with ``KEY=VALUE`` overrides applied on top;
+every value is checked against the field metadata of :mod:`jellysim.config.schema`. Problems raise
+:class:`~jellysim.errors.InputError` with at most three lines: the key, the value, what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+import tomllib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from jellysim.config.schema import Scene
+from jellysim.errors import InputError
+
+Tree = dict[str, Any]
+
+
+def _suggest(name: str, candidates: Iterable[str]) -> str:
+    close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def _fields(cls: type) -> dict[str, dataclasses.Field[Any]]:
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
+def _is_section(f: dataclasses.Field[Any]) -> bool:
+    return "kind" not in f.metadata
+
+
+def _section_type(cls: type, name: str) -> type:
+    return type(getattr(cls(), name))
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, dict):
+        return "a table"
+    return str(value)
+
+
+def _allowed(meta: Mapping[str, Any]) -> str:
+    kind = meta["kind"]
+    if kind == "choice":
+        return "one of " + ", ".join(f"'{c}'" for c in meta["choices"])
+    if kind == "vec3":
+        return "a list of three finite numbers [x, y, z]"
+    if kind == "direction":
+        return "'radial' or a non-zero list of three finite numbers [x, y, z]"
+    if kind == "str":
+        return "a name of letters, digits, '_', '.' and '-'"
+    if kind == "bool":
+        return "true or false"
+    noun = "an integer" if kind == "int" else "a finite number"
+    bounds = [
+        f"{op} {meta[key]:g}"
+        for key, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
+        if key in meta
+    ]
+    text = noun + (" " + " and ".join(bounds) if bounds else "")
+    return text + (" (or left unset)" if meta.get("nullable") else "")
+
+
+def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
+    """Return ``value`` converted to the field's type, or raise InputError."""
+
+    def bad() -> InputError:
+        return InputError(f"{key} = {_show(value)} is not allowed: expected {_allowed(meta)}")
+
+    kind = meta["kind"]
+    if value is None and meta.get("nullable"):
+        return None
+    if kind == "choice":
+        if not isinstance(value, str) or value not in meta["choices"]:
+            suggestion = _suggest(value, meta["choices"]) if isinstance(value, str) else ""
+            raise InputError(
+                f"{key} = {_show(value)} is not allowed: expected {_allowed(meta)}{suggestion}"
+            )
+        return value
+    if kind == "str":
+        if not isinstance(value, str) or not re.match(meta.get("pattern", ".*"), value):
+            raise bad()
+        return value
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise bad()
+        return value
+    if kind in ("vec3", "direction"):
+        if kind == "direction" and value == "radial":
+            return value
+        if (
+            not isinstance(value, (list, tuple))
+            or len(value) != 3
+            or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in value)
+            or not all(math.isfinite(c) for c in value)
+        ):
+            raise bad()
+        vector = tuple(float(c) for c in value)
+        if kind == "direction" and not any(vector):
+            raise bad()
+        return vector
+    if kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad()
+        number: float = value
+    else:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad()
+        number = float(value)
+        if not math.isfinite(number):
+            raise bad()
+    if (
+        ("gt" in meta and not number > meta["gt"])
+        or ("ge" in meta and not number >= meta["ge"])
+        or ("lt" in meta and not number < meta["lt"])
+        or ("le" in meta and not number <= meta["le"])
+    ):
+        raise bad()
+    return value if kind == "int" else float(number)
+
+
+def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
+    fields = _fields(cls)
+    for key in tree:
+        if key not in fields:
+            where = f"[{prefix[:-1]}]" if prefix else "the scene"
+            raise InputError(
+                f"unknown key '{prefix}{key}' in {where}{_suggest(key, fields)}; "
+                f"allowed: {', '.join(fields)}"
+            )
+    kwargs: dict[str, Any] = {}
+    for name, f in fields.items():
+        if name not in tree:
+            continue
+        value = tree[name]
+        if _is_section(f):
+            if not isinstance(value, dict):
+                raise InputError(f"{prefix}{name} must be a table [{prefix}{name}], got {_show(value)}")
+            kwargs[name] = _build(_section_type(cls, name), value, f"{prefix}{name}.")
+        else:
+            kwargs[name] = _check_value(prefix + name, value, f.metadata)
+    return cls(**kwargs)
+
+
+def scene_from_tree(tree: Mapping[str, Any]) -> Scene:
+    """Validate a nested mapping (as read from TOML) and build the scene."""
+    scene = _build(Scene, tree, "")
+    _check_consistency(scene)
+    return scene
+
+
+def _check_consistency(scene: Scene) -> None:
+    """Rules that involve more than one key."""
+    t = scene.tentacles
+    if t.count * t.particles > 5_000_000:
+        raise InputError(
+            f"tentacles.count * tentacles.particles = {t.count * t.particles} is too large: "
+            "at most 5,000,000 simulated particles"
+        )
+
+
+def parse_toml(text: str, source: str) -> Tree:
+    """Parse TOML text; a syntax error names the source and the line."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        detail = str(err)
+        raise InputError(f"{source}: TOML syntax error: {detail}") from None
+
+
+def read_scene_file(path: str | Path) -> Tree:
+    """Read a TOML scene file into a tree (not yet validated)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+        raise InputError(f"cannot read scene file '{p}': {reason}") from None
+    return parse_toml(text, str(p))
+
+
+def parse_override(item: str) -> tuple[str, Any]:
+    """Split ``KEY=VALUE``; VALUE is a TOML value, a bare word is taken as a string."""
+    if "=" not in item:
+        raise InputError(f"--set {item!r}: expected KEY=VALUE, e.g. tentacles.youngs_modulus=1e5")
+    key, raw = item.split("=", 1)
+    key, raw = key.strip(), raw.strip()
+    if not key:
+        raise InputError(f"--set {item!r}: the key is empty")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.+-]*", raw):
+            value = raw
+        else:
+            raise InputError(f"--set {key}: cannot read the value {raw!r} as a TOML value") from None
+    return key, value
+
+
+def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tree:
+    """Return a copy of ``tree`` with dotted-key overrides applied; unknown keys are errors."""
+    result = _deep_copy(tree)
+    for dotted, value in overrides.items():
+        parts = dotted.split(".")
+        cls: type = Scene
+        node = result
+        for depth, part in enumerate(parts):
+            fields = _fields(cls)
+            prefix = ".".join(parts[:depth])
+            if part not in fields:
+                where = f"[{prefix}]" if prefix else "the scene"
+                full = ".".join([*parts[:depth], part])
+                raise InputError(
+                    f"unknown key '{full}' in {where}{_suggest(part, fields)}; "
+                    f"allowed: {', '.join(fields)}"
+                )
+            f = fields[part]
+            last = depth == len(parts) - 1
+            if _is_section(f):
+                if last:
+                    raise InputError(f"--set {dotted}: '{dotted}' is a table; set one of its keys")
+                cls = _section_type(cls, part)
+                node = node.setdefault(part, {})
+            else:
+                if not last:
+                    raise InputError(f"--set {dotted}: '{part}' is a value, not a table")
+                node[part] = value
+    return result
+
+
+def _deep_copy(tree: Mapping[str, Any]) -> Tree:
+    return {k: _deep_copy(v) if isinstance(v, Mapping) else v for k, v in tree.items()}
+
+
+def scene_to_tree(scene: Scene) -> Tree:
+    """The resolved scene as a nested mapping with every key explicit."""
+
+    def convert(obj: Any) -> Any:
+        if dataclasses.is_dataclass(obj):
+            out = {}
+            for f in dataclasses.fields(obj):
+                value = getattr(obj, f.name)
+                if value is None:
+                    continue  # TOML has no null; an unset optional key stays unset
+                out[f.name] = convert(value)
+            return out
+        if isinstance(obj, tuple):
+            return list(obj)
+        return obj
+
+    tree: Tree = convert(scene)
+    return tree
+
+
+def scene_to_toml(scene: Scene) -> str:
+    """The resolved scene as TOML text (loads back to an equal scene)."""
+    return tomli_w.dumps(scene_to_tree(scene))

@@ -1,0 +1,165 @@
+"""Scene parameters: frozen dataclasses, one per TOML table.
+
+Every field carries its unit, its allowed range and a one-line description in its metadata; the
+validator (:mod:`jellysim.config.load`) and the generated reference ``docs/scene.md``
+(:mod:`jellysim.config.docs`) both read them, so the documentation cannot drift from the code.
+SI units everywhere; jellyfish scenes are 3-D with z up (DESIGN §3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+# Allowed-value specifications understood by the validator.
+#   kind: "float" | "int" | "str" | "choice" | "vec3" | "direction" | "bool"
+#   gt / ge / lt / le: numeric bounds; choices: tuple of names; nullable: None allowed.
+
+
+def param(default: Any, *, unit: str = "", doc: str, kind: str = "float", **spec: Any) -> Any:
+    """A scene parameter with its unit, description and allowed values."""
+    meta = {"unit": unit, "doc": doc, "kind": kind, **spec}
+    if isinstance(default, (list, tuple)):
+        value = tuple(default)
+        return field(default_factory=lambda: value, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class Water:
+    density: float = param(1000.0, unit="kg/m3", doc="density of the water", gt=0.0)
+    viscosity: float = param(1.0e-3, unit="Pa s", doc="dynamic viscosity of the water", gt=0.0)
+    gravity: tuple[float, float, float] = param(
+        (0.0, 0.0, -9.81), unit="m/s2", kind="vec3", doc="gravitational acceleration (z up)"
+    )
+
+
+@dataclass(frozen=True)
+class Flow:
+    speed: float = param(
+        0.3,
+        unit="m/s",
+        doc="speed of the water relative to the bell, along the bell axis from root to tip",
+    )
+    noise: float = param(
+        0.0, unit="m/s", ge=0.0, doc="standard deviation of each component of the flow noise"
+    )
+    noise_correlation_time: float = param(
+        0.5,
+        unit="s",
+        gt=0.0,
+        doc="correlation time of the smooth (Ornstein-Uhlenbeck) flow noise, one per tentacle",
+    )
+
+
+@dataclass(frozen=True)
+class Tentacles:
+    count: int = param(6, kind="int", ge=1, le=10000, doc="number of simulated tentacles")
+    particles: int = param(
+        60, kind="int", ge=3, le=100000, doc="particles per tentacle, root included"
+    )
+    spacing: float = param(
+        0.01, unit="m", gt=0.0, doc="particle spacing d, also the tentacle diameter"
+    )
+    youngs_modulus: float = param(
+        100.0, unit="Pa", gt=0.0, doc="Young's modulus E of the tentacle material"
+    )
+    density: float | None = param(
+        None,
+        unit="kg/m3",
+        gt=0.0,
+        nullable=True,
+        doc="density of the tentacle material (default: the water density, neutrally buoyant)",
+    )
+    bending: str = param(
+        "euler-bernoulli",
+        kind="choice",
+        choices=("euler-bernoulli", "ewing"),
+        doc="bending span: 12^(1/3) d gives stiffness EI; 'ewing' is the paper's 2d (1.5 EI)",
+    )
+    root: str = param(
+        "clamped",
+        kind="choice",
+        choices=("clamped", "pinned"),
+        doc="root held along its initial direction in the bell frame, or a free pin",
+    )
+    interpolation: int = param(
+        1, kind="int", ge=1, le=1000, doc="tentacles drawn per simulated tentacle (render time)"
+    )
+
+
+@dataclass(frozen=True)
+class Bell:
+    model: str = param(
+        "none",
+        kind="choice",
+        choices=("none",),
+        doc="bell model driving the tentacle roots",
+    )
+    radius: float = param(0.15, unit="m", gt=0.0, doc="margin radius of the bell")
+    period: float = param(1.0, unit="s", gt=0.0, doc="pulse period of the bell")
+    contraction: float = param(
+        0.0,
+        ge=0.0,
+        lt=1.0,
+        doc="fraction of the margin radius lost at full contraction",
+    )
+
+
+@dataclass(frozen=True)
+class RootMotion:
+    amplitude: float = param(
+        0.0, unit="m", ge=0.0, doc="amplitude of the forced root oscillation (bell.model = none)"
+    )
+    frequency: float = param(1.0, unit="Hz", ge=0.0, doc="frequency of the root oscillation")
+    direction: str | tuple[float, float, float] = param(
+        "radial",
+        kind="direction",
+        doc="'radial' (outward from the bell axis) or a vector [x, y, z] (normalised)",
+    )
+
+
+@dataclass(frozen=True)
+class Solver:
+    dt_safety: float = param(
+        1.0,
+        gt=0.0,
+        le=10.0,
+        doc="factor on the substep the code chooses (smaller: more accurate; for studies)",
+    )
+    checkpoint_every: int = param(
+        10, kind="int", ge=1, doc="frames between checkpoints (for --resume)"
+    )
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str = param("scene", kind="str", pattern=r"^[A-Za-z0-9_.-]+$", doc="name of the scene")
+    duration: float = param(10.0, unit="s", gt=0.0, le=1.0e6, doc="simulated time")
+    fps: float = param(30.0, unit="1/s", gt=0.0, le=10000.0, doc="frames stored per second")
+    seed: int = param(1, kind="int", ge=0, doc="seed of every random draw (flow noise)")
+    water: Water = field(default_factory=Water)
+    flow: Flow = field(default_factory=Flow)
+    tentacles: Tentacles = field(default_factory=Tentacles)
+    bell: Bell = field(default_factory=Bell)
+    root_motion: RootMotion = field(default_factory=RootMotion)
+    solver: Solver = field(default_factory=Solver)
+
+    @property
+    def frame_count(self) -> int:
+        """F = round(duration * fps) + 1 frames, t = 0 included."""
+        return int(round(self.duration * self.fps)) + 1
+
+    @property
+    def tentacle_density(self) -> float:
+        """Density of the tentacles, the water's when unset (neutral buoyancy)."""
+        d = self.tentacles.density
+        return self.water.density if d is None else d
+
+
+SECTIONS: dict[str, type] = {
+    f.name: f.type if isinstance(f.type, type) else globals()[str(f.type)]
+    for f in dataclasses.fields(Scene)
+    if f.name in ("water", "flow", "tentacles", "bell", "root_motion", "solver")
+}

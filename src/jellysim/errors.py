@@ -1,0 +1,29 @@
+"""Errors that the command line maps to exit statuses (DESIGN §3)."""
+
+from __future__ import annotations
+
+
+class JellysimError(Exception):
+    """Base of jellysim's own errors; ``exit_status`` is what the command line returns."""
+
+    exit_status = 1
+
+
+class InputError(JellysimError):
+    """Invalid input: a scene key, a value, a file or a command-line argument (exit status 2).
+
+    The message is at most three lines naming the key, the value and what is allowed.
+    """
+
+    exit_status = 2
+
+
+class SimulationUnstable(JellysimError):
+    """The simulation diverged (exit status 3); frames written before stay readable."""
+
+    exit_status = 3
+
+    def __init__(self, message: str, *, time: float, tentacle: int | None = None) -> None:
+        super().__init__(message)
+        self.time = time
+        self.tentacle = tentacle

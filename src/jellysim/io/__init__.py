@@ -1,0 +1,1 @@
+"""Input and output: the result store, checkpoints and plots."""

@@ -1,0 +1,52 @@
+"""Checkpoints: the full simulation state after a frame, written atomically (tmp + rename).
+
+The state is everything the frame loop reads, so a resumed run continues bitwise identically:
+tentacle positions and velocities and the frame index. The flow noise is a pure function of the
+seed and the time (:mod:`jellysim.tentacle.flow`), so it needs no saved generator state.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from jellysim.errors import InputError
+
+CHECKPOINT_FILE = "checkpoint.npz"
+
+
+def save_checkpoint(folder: Path, frame: int, scene_toml: str, state: dict[str, np.ndarray]) -> None:
+    """Write the state after ``frame`` (0-based index of the last frame written)."""
+    path = folder / CHECKPOINT_FILE
+    temporary = folder / (CHECKPOINT_FILE + ".tmp")
+    with open(temporary, "wb") as handle:
+        np.savez(handle, frame=np.int64(frame), scene=np.array(scene_toml), **state)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, path)
+
+
+def load_checkpoint(folder: Path, scene_toml: str) -> tuple[int, dict[str, np.ndarray]]:
+    """The last checkpoint of the run in ``folder``; it must belong to the same scene."""
+    path = folder / CHECKPOINT_FILE
+    if not path.is_file():
+        raise InputError(f"nothing to resume in '{folder}': no {CHECKPOINT_FILE} (run without --resume)")
+    try:
+        with np.load(path) as data:
+            saved_scene = str(data["scene"])
+            frame = int(data["frame"])
+            state = {k: data[k].copy() for k in data.files if k not in ("frame", "scene")}
+    except (OSError, ValueError, KeyError) as err:
+        raise InputError(f"cannot read checkpoint '{path}': {err}") from None
+    if saved_scene != scene_toml:
+        raise InputError(
+            f"cannot resume '{folder}': the scene differs from the run being resumed "
+            "(compare with its scene.toml, or run with --force to start again)"
+        )
+    return frame, state
+
+
+def remove_checkpoint(folder: Path) -> None:
+    (folder / CHECKPOINT_FILE).unlink(missing_ok=True)

@@ -1,0 +1,193 @@
+"""The result store: ``result.h5`` (layout in DESIGN §3), written frame by frame in HDF5 SWMR mode.
+
+Each frame is appended and flushed before it is reported as written, so a run killed at any
+moment (SIGKILL included) leaves a file holding every reported frame. A file whose writer was
+killed still carries HDF5's "open for writing" flag: jellysim's own reader opens it (in SWMR read
+mode); other tools need ``h5clear -s result.h5`` (Debian package hdf5-tools) first, or a
+``jellysim run --resume``, which rewrites it cleanly.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import h5py
+import numpy as np
+
+from jellysim.errors import InputError
+
+RESULT_FILE = "result.h5"
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A per-frame dataset: its path, the shape of one frame, units and description."""
+
+    path: str
+    frame_shape: tuple[int, ...]
+    units: str
+    dtype: Any = np.float64
+
+
+def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[Dataset]:
+    return [
+        Dataset("time", (), "s"),
+        Dataset("tentacles/position", (tentacles, particles, 3), "m"),
+        Dataset("tentacles/velocity", (tentacles, particles, 3), "m/s"),
+        Dataset("tentacles/constraint_error", (), "1"),
+        Dataset("tentacles/projection_iterations", (), "1", np.int32),
+        Dataset("bell/rim", (tentacles, 3), "m"),
+        Dataset("bell/rim_velocity", (tentacles, 3), "m/s"),
+        Dataset("bell/margin", (margin_points, 3), "m"),
+    ]
+
+
+class ResultWriter:
+    """Appends frames to ``result.h5`` in SWMR mode; every append is flushed to disk."""
+
+    def __init__(self, path: Path, datasets: list[Dataset], attributes: dict[str, Any],
+                 initial: dict[str, np.ndarray] | None = None) -> None:
+        """Create the file (replacing one there), optionally starting with ``initial`` frames."""
+        self.path = path
+        temporary = path.with_name(path.name + ".tmp")
+        f = h5py.File(temporary, "w", libver="latest")
+        for spec in datasets:
+            data = None if initial is None else initial[spec.path]
+            rows = 0 if data is None else data.shape[0]
+            chunk_rows = max(1, min(64, 2**20 // max(1, 8 * int(np.prod(spec.frame_shape)))))
+            ds = f.create_dataset(
+                spec.path,
+                shape=(rows, *spec.frame_shape),
+                maxshape=(None, *spec.frame_shape),
+                chunks=(chunk_rows, *spec.frame_shape),
+                dtype=spec.dtype,
+                data=data,
+            )
+            ds.attrs["units"] = spec.units
+        for key, value in attributes.items():
+            f.attrs[key] = value
+        f.close()
+        os.replace(temporary, path)
+        self._file = h5py.File(path, "r+", libver="latest")
+        self._file.swmr_mode = True
+        self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
+        self.frames = 0 if initial is None else int(initial["time"].shape[0])
+
+    def append(self, values: dict[str, np.ndarray | float]) -> None:
+        """Append one frame (every dataset) and flush it to disk."""
+        index = self.frames
+        for name, ds in self._datasets.items():
+            ds.resize(index + 1, axis=0)
+            ds[index] = values[name]
+        for ds in self._datasets.values():
+            ds.flush()
+        self._file.flush()
+        self.frames = index + 1
+
+    def close(self) -> None:
+        if self._file.id.valid:
+            self._file.close()
+
+
+def _open(path: Path) -> h5py.File:
+    try:
+        return h5py.File(path, "r")
+    except OSError:
+        # A run killed while writing leaves the SWMR "open for writing" flag set.
+        return h5py.File(path, "r", swmr=True)
+
+
+def read_frames(path: Path, datasets: list[Dataset], count: int) -> dict[str, np.ndarray]:
+    """The first ``count`` frames of every dataset (for a resume)."""
+    with _open(path) as f:
+        return {spec.path: f[spec.path][:count] for spec in datasets}
+
+
+class Result:
+    """A result opened for reading: ``with jellysim.open_result(DIR) as r: ...``.
+
+    Arrays are read on access (F = frames written): ``time`` (F,) s; ``tentacle_positions`` and
+    ``tentacle_velocities`` (F, T, P, 3) m, m/s; ``rim``, ``rim_velocity`` (F, T, 3);
+    ``margin`` (F, R, 3) m. ``file`` is the open :class:`h5py.File` for anything else.
+    """
+
+    def __init__(self, folder: str | os.PathLike[str]) -> None:
+        folder = Path(folder)
+        path = folder / RESULT_FILE if folder.is_dir() or folder.suffix != ".h5" else folder
+        if not path.is_file():
+            raise InputError(f"no result at '{folder}': {path.name} not found (run 'jellysim run' first)")
+        try:
+            self.file = _open(path)
+        except OSError as err:
+            raise InputError(f"cannot open '{path}': {err}") from None
+        self.path = path
+        self.folder = path.parent
+
+    def __enter__(self) -> Result:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.file.close()
+
+    def _array(self, name: str) -> np.ndarray:
+        return np.asarray(self.file[name][:])
+
+    @property
+    def time(self) -> np.ndarray:
+        return self._array("time")
+
+    @property
+    def tentacle_positions(self) -> np.ndarray:
+        return self._array("tentacles/position")
+
+    @property
+    def tentacle_velocities(self) -> np.ndarray:
+        return self._array("tentacles/velocity")
+
+    @property
+    def rim(self) -> np.ndarray:
+        return self._array("bell/rim")
+
+    @property
+    def rim_velocity(self) -> np.ndarray:
+        return self._array("bell/rim_velocity")
+
+    @property
+    def margin(self) -> np.ndarray:
+        return self._array("bell/margin")
+
+    @property
+    def frames(self) -> int:
+        return int(self.file["time"].shape[0])
+
+    @property
+    def expected_frames(self) -> int:
+        return int(self.file.attrs["frames_expected"])
+
+    @property
+    def complete(self) -> bool:
+        return self.frames == self.expected_frames
+
+    @property
+    def scene_text(self) -> str:
+        return str(self.file.attrs["scene"])
+
+    @property
+    def scene(self) -> Any:
+        from jellysim.config import load_scene
+        from jellysim.config.load import parse_toml
+
+        return load_scene(parse_toml(self.scene_text, str(self.path)))
+
+
+def open_result(folder: str | os.PathLike[str]) -> Result:
+    """Open the result in ``folder`` (or a ``result.h5`` path) for reading."""
+    return Result(folder)

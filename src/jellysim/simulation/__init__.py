@@ -1,0 +1,271 @@
+"""The frame loop: a scene in, ``result.h5`` out (DESIGN §1).
+
+:class:`Simulation` holds the parameters (built once) apart from the state (mutated in place);
+``step_frame`` advances every tentacle through one frame's substeps in one compiled call.
+:func:`run` adds the result store, checkpoints, resume, the watchdog and progress.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import sys
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jellysim.bell import RootDriver, make_root_driver
+from jellysim.config import Scene, load_scene, scene_to_toml
+from jellysim.errors import InputError, SimulationUnstable
+from jellysim.io.checkpoint import load_checkpoint, remove_checkpoint, save_checkpoint
+from jellysim.io.result import RESULT_FILE, Result, ResultWriter, frame_datasets, read_frames
+from jellysim.tentacle.flow import flow_noise_for, water_velocity
+from jellysim.tentacle.kernels import advance_frame
+from jellysim.tentacle.model import characteristic_speed, chain_model_for, medium_for, plan_substeps
+
+log = logging.getLogger(__name__)
+
+SCENE_FILE = "scene.toml"
+# Watchdog: a chain whose RMS speed exceeds this multiple of the scene's speed scale has run away.
+RUNAWAY_SPEED_FACTOR = 100.0
+
+Observer = Callable[["Simulation"], None]
+
+
+class Simulation:
+    """One scene's tentacles and their driver.
+
+    State (mutated in place, never rebound): ``positions``, ``velocities`` (T, P, 3) in m, m/s;
+    ``frame`` the index of the frame the state belongs to (time ``frame / fps``).
+    """
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        self.driver: RootDriver = make_root_driver(scene)
+        self.model = chain_model_for(scene)
+        self.medium = medium_for(scene)
+        self.noise = flow_noise_for(scene)
+        self.plan = plan_substeps(scene)
+        self.frame_dt = 1.0 / scene.fps
+        self.observers: list[Observer] = []
+        t = scene.tentacles
+        self.positions = np.empty((t.count, t.particles, 3))
+        self.velocities = np.empty((t.count, t.particles, 3))
+        self.diagnostics = np.zeros((t.count, 3))
+        self.frame = 0
+        self.reset()
+        self.speed_limit = RUNAWAY_SPEED_FACTOR * self._speed_scale()
+
+    def _speed_scale(self) -> float:
+        """A speed the tentacles should never much exceed (m/s)."""
+        s = self.scene
+        length = (s.tentacles.particles - 1) * s.tentacles.spacing
+        g = float(np.linalg.norm(s.water.gravity))
+        contrast = abs(s.tentacle_density - s.water.density) / s.tentacle_density
+        return characteristic_speed(s) + math.sqrt(g * length * contrast) + 0.1
+
+    def reset(self) -> None:
+        """Frame 0: every tentacle straight from its root along its clamp direction, at rest."""
+        roots, root_velocities, directions = self.driver.roots(np.zeros(1))
+        offsets = np.arange(self.scene.tentacles.particles) * self.scene.tentacles.spacing
+        self.positions[:] = roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
+        self.velocities[:] = 0.0
+        self.velocities[:, 0] = root_velocities[0]
+        self.frame = 0
+
+    @property
+    def time(self) -> float:
+        return self.frame * self.frame_dt
+
+    def substep_times(self, frame: int) -> np.ndarray:
+        """End times (s) of the substeps that lead from ``frame`` to ``frame + 1``."""
+        n = self.plan.substeps
+        return (frame * n + np.arange(1, n + 1)) * (self.frame_dt / n)
+
+    def step_frame(self) -> None:
+        """Advance the state by one frame; raise SimulationUnstable if it diverged."""
+        times = self.substep_times(self.frame)
+        roots, root_velocities, directions = self.driver.roots(times)
+        flow = water_velocity(
+            self.scene.flow.speed,
+            self.driver.axis(times),
+            self.driver.bell_velocity(times),
+            self.noise.sample(times),
+        )
+        advance_frame(
+            self.positions, self.velocities, roots, root_velocities, directions, flow,
+            self.model, self.medium, self.plan.dt, self.diagnostics,
+        )
+        self.frame += 1
+        self._watchdog(times)
+        for observer in self.observers:
+            observer(self)
+
+    def _watchdog(self, times: np.ndarray) -> None:
+        failed = self.diagnostics[:, 2]
+        if np.any(failed >= 0):
+            chain = int(np.argmax(failed >= 0))
+            when = float(times[int(failed[chain])])
+            raise SimulationUnstable(
+                f"unstable at t = {when:.6g} s in tentacle {chain}: the state became non-finite "
+                "or the length constraint could not be met; lower solver.dt_safety "
+                "or check the scene's forces",
+                time=when, tentacle=chain,
+            )
+        rms = np.sqrt(np.mean(np.sum(self.velocities**2, axis=2), axis=1))
+        if not np.all(np.isfinite(rms)) or np.any(rms > self.speed_limit):
+            bad = ~np.isfinite(rms) | (rms > self.speed_limit)
+            chain = int(np.argmax(bad))
+            raise SimulationUnstable(
+                f"runaway energy at t = {self.time:.6g} s in tentacle {chain}: RMS speed "
+                f"{rms[chain]:.3g} m/s exceeds {self.speed_limit:.3g} m/s; lower solver.dt_safety "
+                "or check the scene's forces",
+                time=self.time, tentacle=chain,
+            )
+
+    def frame_values(self) -> dict[str, Any]:
+        """The current frame as the result store's datasets."""
+        t = np.array([self.time])
+        roots, root_velocities, _ = self.driver.roots(t)
+        return {
+            "time": self.time,
+            "tentacles/position": self.positions,
+            "tentacles/velocity": self.velocities,
+            "tentacles/constraint_error": float(self.diagnostics[:, 0].max(initial=0.0)),
+            "tentacles/projection_iterations": int(self.diagnostics[:, 1].max(initial=0.0)),
+            "bell/rim": roots[0],
+            "bell/rim_velocity": root_velocities[0],
+            "bell/margin": self.driver.margin(self.time),
+        }
+
+    def datasets(self) -> list[Any]:
+        t = self.scene.tentacles
+        return frame_datasets(t.count, t.particles, self.driver.margin(0.0).shape[0])
+
+    def attributes(self, scene_toml: str) -> dict[str, Any]:
+        from jellysim import __version__
+
+        return {
+            "scene": scene_toml,
+            "version": __version__,
+            "seed": self.scene.seed,
+            "frames_expected": self.scene.frame_count,
+            "fps": self.scene.fps,
+            "tentacle_dt": self.plan.dt,
+            "tentacle_substeps": self.plan.substeps,
+            "bell_model": self.scene.bell.model,
+        }
+
+
+def default_out(scene: Scene) -> Path:
+    return Path("out") / scene.name
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(text, encoding="utf-8")
+    os.replace(temporary, path)
+
+
+def run(
+    scene: Scene | str | os.PathLike[str] | Mapping[str, Any],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    overrides: Mapping[str, Any] | None = None,
+    force: bool = False,
+    resume: bool = False,
+    quiet: bool = True,
+    observers: list[Observer] | None = None,
+) -> Result:
+    """Run a scene to ``out/result.h5`` (default ``out/<name>``) and return the open result.
+
+    ``force`` replaces an existing result; ``resume`` continues it from its last checkpoint.
+    ``quiet=False`` shows a progress bar with ETA on runs longer than two seconds.
+    """
+    if not isinstance(scene, Scene) or overrides:
+        scene = load_scene(scene if not isinstance(scene, os.PathLike) else str(scene), overrides)
+    folder = Path(out) if out is not None else default_out(scene)
+    result_path = folder / RESULT_FILE
+    scene_toml = scene_to_toml(scene)
+    if force and resume:
+        raise InputError("--force and --resume exclude each other")
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--out {folder}: exists and is not a folder")
+    if result_path.exists() and not (force or resume):
+        raise InputError(
+            f"{result_path} exists; --force replaces it, --resume continues it"
+        )
+    if resume and not result_path.exists():
+        raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
+
+    simulation = Simulation(scene)
+    for observer in observers or []:
+        simulation.observers.append(observer)
+    datasets = simulation.datasets()
+    if resume:
+        with Result(folder) as existing:
+            if existing.complete and existing.scene_text == scene_toml:
+                log.info("%s is complete; nothing to resume", result_path)
+                return Result(folder)
+        frame, state = load_checkpoint(folder, scene_toml)
+        simulation.positions[:] = state["positions"]
+        simulation.velocities[:] = state["velocities"]
+        simulation.frame = frame
+        kept = read_frames(result_path, datasets, frame + 1)
+        writer = ResultWriter(result_path, datasets, simulation.attributes(scene_toml), kept)
+    else:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise InputError(f"--out {folder}: cannot create the folder ({err.strerror})") from None
+        if not os.access(folder, os.W_OK):
+            raise InputError(f"--out {folder}: the folder is not writable")
+        remove_checkpoint(folder)
+        _write_text_atomic(folder / SCENE_FILE, scene_toml)
+        writer = ResultWriter(result_path, datasets, simulation.attributes(scene_toml))
+        writer.append(simulation.frame_values())
+
+    log.info(
+        "%s: %d tentacles x %d particles, %s, %d frames -> %s",
+        scene.name, scene.tentacles.count, scene.tentacles.particles,
+        simulation.plan.describe(), scene.frame_count, result_path,
+    )
+    every = scene.solver.checkpoint_every
+    try:
+        with _progress(scene.frame_count - 1, simulation.frame, quiet) as bar:
+            while simulation.frame < scene.frame_count - 1:
+                simulation.step_frame()
+                writer.append(simulation.frame_values())
+                if simulation.frame % every == 0:
+                    save_checkpoint(
+                        folder, simulation.frame, scene_toml,
+                        {"positions": simulation.positions, "velocities": simulation.velocities},
+                    )
+                bar.update(1)
+    finally:
+        writer.close()
+    remove_checkpoint(folder)
+    return Result(folder)
+
+
+class _NoBar:
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *args: object) -> None:
+        return None
+
+    def update(self, n: int) -> None:
+        return None
+
+
+def _progress(total: int, done: int, quiet: bool) -> Any:
+    if quiet:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=done, unit="frame", delay=2.0, file=sys.stderr,
+                dynamic_ncols=True, desc="simulating")

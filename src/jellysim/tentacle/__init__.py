@@ -1,0 +1,1 @@
+"""Tentacles: particle chains with bending after Young's modulus and sphere drag (paper §4.1)."""

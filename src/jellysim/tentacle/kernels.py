@@ -1,0 +1,376 @@
+"""Compiled kernels of the tentacle model (paper §4.1; equations numbered as in docs/theory/tentacle.md).
+
+A tentacle is a chain of P particles at spacing d, root first. Arrays are float64:
+positions and velocities ``(T, P, 3)`` in m and m/s for T chains. The root (particle 0) is
+prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T7-T9):
+
+1. drag gain ``k_i`` from the relative velocity at the start of the step (Eq. T4-T5),
+2. backward-Euler solve of ``(M + dt K_d + dt^2 c K) x* = M (x + dt v) + dt K_d x + dt^2 (f + K_d u)``
+   for the free particles: bending (Eq. T2) and drag implicit, a pentadiagonal Cholesky solve in
+   O(P), plus a rank-one (Sherman-Morrison) term for the clamped root,
+3. exact projection of x* onto the segment-length constraints ``|x_{i+1} - x_i| = d`` by Newton
+   iterations on a tridiagonal system (fast projection), O(P) each,
+4. ``v = (x_new - x_old) / dt``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+REYNOLDS_STOKES = 1.0  # below: Stokes drag 3 pi mu d u (Eq. T4, first branch)
+REYNOLDS_HOLD = 1.0e4  # above: the drag coefficient is held at its value here (Eq. T4)
+
+
+class ChainModel(NamedTuple):
+    """Topology and lumped coefficients shared by every chain (built once, never mutated).
+
+    ``mass``, ``inverse_mass``, ``volume``: ``(P,)`` kg, 1/kg, m3 (root inverse mass 0).
+    ``stiffness_diag``, ``stiffness_off1``, ``stiffness_off2``: ``(P-1,)`` bands of the
+    dimensionless bending matrix K over the free particles (force = -c K x).
+    ``root_coupling``: ``(2,)`` K entries coupling free particles 1 and 2 to the root.
+    """
+
+    mass: np.ndarray
+    inverse_mass: np.ndarray
+    volume: np.ndarray
+    stiffness_diag: np.ndarray
+    stiffness_off1: np.ndarray
+    stiffness_off2: np.ndarray
+    root_coupling: np.ndarray
+    bending_stiffness: float  # c = 48 E I / L^3, N/m (Eq. T2)
+    clamped: bool
+    spacing: float  # d, m
+
+
+class Medium(NamedTuple):
+    """The water and the tentacle material."""
+
+    density: float  # rho_w, kg/m3
+    viscosity: float  # mu, Pa s
+    gravity: np.ndarray  # (3,) m/s2
+    tentacle_density: float  # rho_t, kg/m3
+
+
+@njit(cache=True)
+def drag_coefficient(reynolds: float) -> float:
+    """Sphere drag coefficient of the paper, Eq. (T4) [Hirato & Kawaguchi Eq. 4].
+
+    ``C_R = 24 / Re`` for Re < 1; ``(0.55 + 4.8 / sqrt(Re))^2`` for 1 <= Re <= 1e4; held at its
+    value at Re = 1e4 above. The law jumps from 24 to 28.6 at Re = 1, as the paper writes it.
+    """
+    if reynolds < REYNOLDS_STOKES:
+        return 24.0 / reynolds
+    re = min(reynolds, REYNOLDS_HOLD)
+    root = 0.55 + 4.8 / math.sqrt(re)
+    return root * root
+
+
+@njit(cache=True)
+def drag_gain(speed: float, diameter: float, density: float, viscosity: float) -> float:
+    """Gain k (kg/s) with drag force ``F = k u_r`` on a sphere, Eq. (T5).
+
+    ``F = C_R(Re) (rho/2) |u_r| u_r (pi d^2 / 4)``, ``Re = |u_r| d rho / mu``; below Re = 1 this is
+    written as Stokes' ``3 pi mu d u_r`` so that it stays finite at rest.
+    """
+    reynolds = speed * diameter * density / viscosity
+    if reynolds < REYNOLDS_STOKES:
+        return 3.0 * math.pi * viscosity * diameter
+    area = 0.25 * math.pi * diameter * diameter
+    return drag_coefficient(reynolds) * 0.5 * density * speed * area
+
+
+@njit(cache=True)
+def bending_energy(x: np.ndarray, c: float, clamped: bool, clamp_direction: np.ndarray) -> float:
+    """Discrete bending energy (J) of one chain ``x`` (P, 3), Eq. (T1).
+
+    ``E = (c/8) sum_{i=1}^{P-2} |x_{i-1} - 2 x_i + x_{i+1}|^2`` plus, for a clamped root with
+    direction t, ``(c/4) |(I - t t^T)(x_1 - x_0)|^2`` (a mirror ghost particle, half weight).
+    """
+    energy = 0.0
+    for i in range(1, x.shape[0] - 1):
+        for k in range(3):
+            s = x[i - 1, k] - 2.0 * x[i, k] + x[i + 1, k]
+            energy += 0.125 * c * s * s
+    if clamped:
+        e = x[1] - x[0]
+        along = e[0] * clamp_direction[0] + e[1] * clamp_direction[1] + e[2] * clamp_direction[2]
+        for k in range(3):
+            p = e[k] - along * clamp_direction[k]
+            energy += 0.25 * c * p * p
+    return energy
+
+
+@njit(cache=True)
+def bending_forces(
+    x: np.ndarray, c: float, clamped: bool, clamp_direction: np.ndarray, out: np.ndarray
+) -> None:
+    """Bending force (N) on every particle of one chain, Eq. (T2) [paper Eq. 1-2], into ``out``.
+
+    ``h_i = x_i - (x_{i-1} + x_{i+1}) / 2``, ``P_i = c h_i``: ``-P_i`` on i and ``+P_i / 2`` on
+    i - 1 and i + 1; plus the clamp term's force. Equals minus the gradient of
+    :func:`bending_energy`.
+    """
+    out[:] = 0.0
+    for i in range(1, x.shape[0] - 1):
+        for k in range(3):
+            p = c * (x[i, k] - 0.5 * (x[i - 1, k] + x[i + 1, k]))
+            out[i, k] -= p
+            out[i - 1, k] += 0.5 * p
+            out[i + 1, k] += 0.5 * p
+    if clamped:
+        e = x[1] - x[0]
+        along = e[0] * clamp_direction[0] + e[1] * clamp_direction[1] + e[2] * clamp_direction[2]
+        for k in range(3):
+            f = 0.5 * c * (e[k] - along * clamp_direction[k])
+            out[1, k] -= f
+            out[0, k] += f
+
+
+@njit(cache=True)
+def _penta_solve(
+    diag: np.ndarray,
+    off1: np.ndarray,
+    off2: np.ndarray,
+    rhs: np.ndarray,
+    l0: np.ndarray,
+    l1: np.ndarray,
+    l2: np.ndarray,
+) -> None:
+    """Solve a symmetric positive definite pentadiagonal system in place (banded Cholesky).
+
+    ``A[i, i] = diag[i]``, ``A[i, i+1] = off1[i]``, ``A[i, i+2] = off2[i]``; ``rhs`` (n, m) is
+    overwritten by the solution. ``l0, l1, l2`` (n,) are scratch for the factor's bands.
+    """
+    n = diag.shape[0]
+    for i in range(n):
+        a2 = off2[i - 2] / l0[i - 2] if i >= 2 else 0.0
+        a1 = 0.0
+        if i >= 1:
+            a1 = off1[i - 1]
+            if i >= 2:
+                a1 -= a2 * l1[i - 1]
+            a1 /= l0[i - 1]
+        l2[i] = a2
+        l1[i] = a1
+        l0[i] = math.sqrt(diag[i] - a2 * a2 - a1 * a1)
+    m = rhs.shape[1]
+    for i in range(n):
+        for k in range(m):
+            s = rhs[i, k]
+            if i >= 1:
+                s -= l1[i] * rhs[i - 1, k]
+            if i >= 2:
+                s -= l2[i] * rhs[i - 2, k]
+            rhs[i, k] = s / l0[i]
+    for i in range(n - 1, -1, -1):
+        for k in range(m):
+            s = rhs[i, k]
+            if i + 1 < n:
+                s -= l1[i + 1] * rhs[i + 1, k]
+            if i + 2 < n:
+                s -= l2[i + 2] * rhs[i + 2, k]
+            rhs[i, k] = s / l0[i]
+
+
+@njit(cache=True)
+def project_lengths(
+    x: np.ndarray,
+    inverse_mass: np.ndarray,
+    spacing: float,
+    tolerance: float,
+    max_iterations: int,
+    edges: np.ndarray,
+    work: np.ndarray,
+) -> int:
+    """Project chain ``x`` (P, 3) onto ``|x_{i+1} - x_i| = d`` with masses, Eq. (T8).
+
+    Newton iterations of the fast projection: ``(J W J^T) lambda = C(x)``, ``x -= W J^T lambda``
+    with ``C_j = |e_j|^2 - d^2``, ``e_j = x_{j+1} - x_j`` and W the inverse masses. J W J^T is
+    tridiagonal, solved by the Thomas algorithm: O(P) per iteration, quadratic convergence.
+    ``edges`` (P-1, 3) and ``work`` (4, P-1) are scratch. Returns the iterations used, or -1 if
+    the relative length error is still above ``tolerance`` after ``max_iterations``.
+    """
+    segments = x.shape[0] - 1
+    d2 = spacing * spacing
+    diag = work[0]
+    upper = work[1]
+    lam = work[2]
+    cp = work[3]
+    for iteration in range(max_iterations + 1):
+        worst = 0.0
+        for j in range(segments):
+            s = 0.0
+            for k in range(3):
+                e = x[j + 1, k] - x[j, k]
+                edges[j, k] = e
+                s += e * e
+            lam[j] = s - d2
+            worst = max(worst, abs(math.sqrt(s) / spacing - 1.0))
+        if not worst <= tolerance:  # also catches NaN
+            if iteration == max_iterations or not math.isfinite(worst):
+                return -1
+        else:
+            return iteration
+        for j in range(segments):
+            ee = 0.0
+            for k in range(3):
+                ee += edges[j, k] * edges[j, k]
+            diag[j] = 4.0 * ee * (inverse_mass[j] + inverse_mass[j + 1])
+            if j + 1 < segments:
+                dot = 0.0
+                for k in range(3):
+                    dot += edges[j, k] * edges[j + 1, k]
+                upper[j] = -4.0 * inverse_mass[j + 1] * dot
+        # Thomas algorithm on (diag, upper) with right-hand side lam (overwritten by lambda).
+        cp[0] = upper[0] / diag[0] if segments > 1 else 0.0
+        lam[0] = lam[0] / diag[0]
+        for j in range(1, segments):
+            denominator = diag[j] - upper[j - 1] * cp[j - 1]
+            if j + 1 < segments:
+                cp[j] = upper[j] / denominator
+            lam[j] = (lam[j] - upper[j - 1] * lam[j - 1]) / denominator
+        for j in range(segments - 2, -1, -1):
+            lam[j] -= cp[j] * lam[j + 1]
+        for i in range(segments + 1):
+            w = inverse_mass[i]
+            if w == 0.0:
+                continue
+            for k in range(3):
+                g = 0.0
+                if i >= 1:
+                    g += 2.0 * edges[i - 1, k] * lam[i - 1]
+                if i < segments:
+                    g -= 2.0 * edges[i, k] * lam[i]
+                x[i, k] -= w * g
+    return -1
+
+
+PROJECTION_TOLERANCE = 1.0e-10  # relative segment-length error after every step
+PROJECTION_MAX_ITERATIONS = 50
+
+
+@njit(cache=True, parallel=True)
+def advance_frame(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    root_positions: np.ndarray,
+    root_velocities: np.ndarray,
+    root_directions: np.ndarray,
+    flow: np.ndarray,
+    model: ChainModel,
+    medium: Medium,
+    dt: float,
+    diagnostics: np.ndarray,
+) -> None:
+    """Advance all chains through the S substeps of one frame, in place.
+
+    ``positions``, ``velocities``: (T, P, 3) state, m and m/s. Per substep s = 0..S-1, at the end
+    time of the substep: ``root_positions``, ``root_velocities`` (S, T, 3) the prescribed roots,
+    ``root_directions`` (S, T, 3) unit clamp directions t, ``flow`` (S, T, 3) the water velocity
+    (m/s) at the chain. ``diagnostics`` (T, 3) receives per chain: the largest relative
+    segment-length error after any substep, the most projection iterations, and the first
+    substep whose state was not finite or whose projection failed (-1 if none).
+    """
+    n_chains = positions.shape[0]
+    n_particles = positions.shape[1]
+    n_free = n_particles - 1
+    n_substeps = root_positions.shape[0]
+    c = model.bending_stiffness
+    d = model.spacing
+    dt2c = dt * dt * c
+    half_dt2c = 0.5 * dt2c
+    for t in prange(n_chains):
+        x = positions[t]
+        v = velocities[t]
+        diag = np.empty(n_free)
+        off1 = dt2c * model.stiffness_off1
+        off2 = dt2c * model.stiffness_off2
+        rhs = np.empty((n_free, 3))
+        ghost = np.empty((n_free, 1))
+        l0 = np.empty(n_free)
+        l1 = np.empty(n_free)
+        l2 = np.empty(n_free)
+        old = np.empty((n_particles, 3))
+        edges = np.empty((n_free, 3))
+        work = np.empty((4, n_free))
+        worst_error = 0.0
+        most_iterations = 0
+        failed_at = -1
+        for s in range(n_substeps):
+            u = flow[s, t]
+            r = root_positions[s, t]
+            tdir = root_directions[s, t]
+            old[:] = x
+            # Assemble the backward-Euler system of the free particles, Eq. (T7).
+            for j in range(n_free):
+                i = j + 1
+                rel0 = u[0] - v[i, 0]
+                rel1 = u[1] - v[i, 1]
+                rel2 = u[2] - v[i, 2]
+                k_drag = drag_gain(
+                    math.sqrt(rel0 * rel0 + rel1 * rel1 + rel2 * rel2),
+                    d,
+                    medium.density,
+                    medium.viscosity,
+                )
+                m = model.mass[i]
+                buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
+                diag[j] = m + dt * k_drag + dt2c * model.stiffness_diag[j]
+                for k in range(3):
+                    rhs[j, k] = (
+                        m * (x[i, k] + dt * v[i, k])
+                        + dt * k_drag * x[i, k]
+                        + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
+                    )
+            # The prescribed root enters through the bending coupling, Eq. (T7).
+            for k in range(3):
+                rhs[0, k] -= dt2c * model.root_coupling[0] * r[k]
+                if n_free > 1:
+                    rhs[1, k] -= dt2c * model.root_coupling[1] * r[k]
+            if model.clamped:
+                along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
+                for k in range(3):
+                    rhs[0, k] -= half_dt2c * along * tdir[k]
+            _penta_solve(diag, off1, off2, rhs, l0, l1, l2)
+            if model.clamped:
+                # Sherman-Morrison for the clamp's rank-one part -(dt^2 c / 2) t t^T at particle 1.
+                ghost[:] = 0.0
+                ghost[0, 0] = 1.0
+                _penta_solve(diag, off1, off2, ghost, l0, l1, l2)
+                ty = tdir[0] * rhs[0, 0] + tdir[1] * rhs[0, 1] + tdir[2] * rhs[0, 2]
+                factor = half_dt2c * ty / (1.0 - half_dt2c * ghost[0, 0])
+                for j in range(n_free):
+                    for k in range(3):
+                        rhs[j, k] += factor * ghost[j, 0] * tdir[k]
+            for k in range(3):
+                x[0, k] = r[k]
+            for j in range(n_free):
+                for k in range(3):
+                    x[j + 1, k] = rhs[j, k]
+            # Exact inextensibility, Eq. (T8).
+            iterations = project_lengths(
+                x, model.inverse_mass, d, PROJECTION_TOLERANCE, PROJECTION_MAX_ITERATIONS, edges, work
+            )
+            # Velocities from the displacement, Eq. (T9).
+            for k in range(3):
+                v[0, k] = root_velocities[s, t, k]
+            finite = True
+            for i in range(1, n_particles):
+                for k in range(3):
+                    v[i, k] = (x[i, k] - old[i, k]) / dt
+                    if not math.isfinite(v[i, k]):
+                        finite = False
+            if iterations < 0 or not finite:
+                failed_at = s
+                break
+            most_iterations = max(most_iterations, iterations)
+            for j in range(n_free):
+                length = math.sqrt(edges[j, 0] ** 2 + edges[j, 1] ** 2 + edges[j, 2] ** 2)
+                worst_error = max(worst_error, abs(length / d - 1.0))
+        diagnostics[t, 0] = worst_error
+        diagnostics[t, 1] = most_iterations
+        diagnostics[t, 2] = failed_at

@@ -1,0 +1,167 @@
+"""Tentacle model set-up: lumped masses, the bending matrix and the substep choice (paper §4.1)."""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from jellysim.config.schema import Scene
+from jellysim.tentacle.kernels import ChainModel, Medium, drag_gain
+
+log = logging.getLogger(__name__)
+
+# Cube of the span L of the paper's three-point bending cell, in units of d^3 (Eq. T2).
+# "euler-bernoulli": L^3 = 12 d^3 makes the chain's continuum stiffness exactly EI;
+# "ewing": the paper's span L = 2d, whose continuum stiffness is 1.5 EI (docs/theory/tentacle.md).
+SPAN_CUBED = {"euler-bernoulli": 12.0, "ewing": 8.0}
+
+CANTILEVER_FIRST_ROOT = 1.8751040687119611  # beta_1 L of a clamped-free beam
+
+
+def second_moment(diameter: float) -> float:
+    """I = pi d^4 / 64 (m^4), paper Eq. 2."""
+    return math.pi * diameter**4 / 64.0
+
+
+def bending_stiffness(youngs_modulus: float, diameter: float, bending: str) -> float:
+    """c = 48 E I / L^3 (N/m), the paper's Eq. 1 solved for P / h."""
+    return 48.0 * youngs_modulus * second_moment(diameter) / (SPAN_CUBED[bending] * diameter**3)
+
+
+def effective_bending_rigidity(youngs_modulus: float, diameter: float, bending: str) -> float:
+    """Continuum limit of the chain's stiffness, EI_eff = c d^3 / 4 (N m^2)."""
+    return bending_stiffness(youngs_modulus, diameter, bending) * diameter**3 / 4.0
+
+
+def bending_matrix(particles: int, clamped: bool) -> np.ndarray:
+    """Dimensionless K (P, P) with bending force ``-c K x`` per coordinate, Eq. (T3).
+
+    K = (1/4) sum_i s_i s_i^T over interior particles with the stencil s_i = (1, -2, 1) at
+    (i-1, i, i+1); a clamped root adds (1/2) s_c s_c^T with s_c = (-1, 1) at (0, 1), the isotropic
+    part of the clamp term (its rank-one part along t is applied in the kernel).
+    """
+    k = np.zeros((particles, particles))
+    stencil = np.array([1.0, -2.0, 1.0])
+    for i in range(1, particles - 1):
+        k[i - 1 : i + 2, i - 1 : i + 2] += 0.25 * np.outer(stencil, stencil)
+    if clamped:
+        k[0:2, 0:2] += 0.5 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    return k
+
+
+def build_chain_model(
+    particles: int,
+    spacing: float,
+    youngs_modulus: float,
+    tentacle_density: float,
+    bending: str = "euler-bernoulli",
+    root: str = "clamped",
+) -> ChainModel:
+    """Lumped masses (interior: one segment pi d^3 / 4; tip: half) and the bending bands."""
+    segment_volume = math.pi * spacing**3 / 4.0
+    volume = np.full(particles, segment_volume)
+    volume[-1] = 0.5 * segment_volume
+    mass = tentacle_density * volume
+    inverse_mass = 1.0 / mass
+    inverse_mass[0] = 0.0  # the root is prescribed
+    clamped = root == "clamped"
+    k = bending_matrix(particles, clamped)
+    free = k[1:, 1:]
+    n = particles - 1
+    return ChainModel(
+        mass=mass,
+        inverse_mass=inverse_mass,
+        volume=volume,
+        stiffness_diag=np.ascontiguousarray(np.diag(free)),
+        stiffness_off1=np.concatenate([np.diag(free, 1), np.zeros(1)])[:n].copy(),
+        stiffness_off2=np.concatenate([np.diag(free, 2), np.zeros(2)])[:n].copy(),
+        root_coupling=np.array([k[1, 0], k[2, 0] if particles > 2 else 0.0]),
+        bending_stiffness=bending_stiffness(youngs_modulus, spacing, bending),
+        clamped=clamped,
+        spacing=float(spacing),
+    )
+
+
+def chain_model_for(scene: Scene) -> ChainModel:
+    t = scene.tentacles
+    return build_chain_model(
+        t.particles, t.spacing, t.youngs_modulus, scene.tentacle_density, t.bending, t.root
+    )
+
+
+def medium_for(scene: Scene) -> Medium:
+    w = scene.water
+    return Medium(
+        density=w.density,
+        viscosity=w.viscosity,
+        gravity=np.array(w.gravity, dtype=np.float64),
+        tentacle_density=scene.tentacle_density,
+    )
+
+
+@dataclass(frozen=True)
+class SubstepPlan:
+    """The substep of the tentacle integrator: ``substeps`` per frame of length ``dt``.
+
+    ``limits`` maps each accuracy limit's name to its value in s (before ``dt_safety``).
+    """
+
+    dt: float
+    substeps: int
+    limits: dict[str, float]
+
+    def describe(self) -> str:
+        binding = min(self.limits, key=self.limits.__getitem__)
+        return f"dt = {self.dt:.3g} s, {self.substeps} substeps per frame (limited by {binding})"
+
+
+def characteristic_speed(scene: Scene) -> float:
+    """A speed scale (m/s) of the tentacles relative to the water."""
+    rm = scene.root_motion
+    return (
+        abs(scene.flow.speed)
+        + 3.0 * scene.flow.noise
+        + 2.0 * math.pi * rm.amplitude * rm.frequency
+    )
+
+
+def plan_substeps(scene: Scene) -> SubstepPlan:
+    """Choose the substep from the model's time scales; the user never sets dt.
+
+    Bending and drag are integrated implicitly (unconditionally stable), so the limits are for
+    accuracy: a tenth of the period over 2 pi of the chain's first cantilever mode
+    ``omega_1 = (1.875 / L)^2 sqrt(EI_eff / (rho_t A))``; half the drag relaxation time
+    ``m / k(U)`` at the characteristic relative speed U; a hundredth of the root-motion period;
+    a twentieth of the noise correlation time; and the frame interval.
+    """
+    t = scene.tentacles
+    frame_dt = 1.0 / scene.fps
+    d = t.spacing
+    length = (t.particles - 1) * d
+    area = math.pi * d * d / 4.0
+    rigidity = effective_bending_rigidity(t.youngs_modulus, d, t.bending)
+    omega_1 = (CANTILEVER_FIRST_ROOT / length) ** 2 * math.sqrt(
+        rigidity / (scene.tentacle_density * area)
+    )
+    mass = scene.tentacle_density * area * d
+    gain = drag_gain(
+        max(characteristic_speed(scene), 1e-12), d, scene.water.density, scene.water.viscosity
+    )
+    limits = {
+        "bending": 0.1 / omega_1,
+        "drag": 0.5 * mass / gain,
+        "frame": frame_dt,
+    }
+    rm = scene.root_motion
+    if rm.amplitude > 0.0 and rm.frequency > 0.0:
+        limits["root motion"] = 0.01 / rm.frequency
+    if scene.flow.noise > 0.0:
+        limits["noise"] = scene.flow.noise_correlation_time / 20.0
+    target = scene.solver.dt_safety * min(limits.values())
+    substeps = max(1, math.ceil(frame_dt / target - 1e-9))
+    plan = SubstepPlan(dt=frame_dt / substeps, substeps=substeps, limits=limits)
+    log.info("tentacles: %s", plan.describe())
+    return plan
