@@ -1,2 +1,125 @@
-def main(argv=None):
+"""The ``jellysim`` command line (DESIGN §3). Exit status: 0 success, 2 invalid input,
+3 the simulation went unstable, 1 anything else."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from jellysim.errors import InputError, JellysimError, SimulationUnstable
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.print_usage(sys.stderr)
+        self.exit(2, f"jellysim: error: {message}\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="jellysim", description="Simulate and animate jellyfish.")
+    from jellysim import __version__
+
+    parser.add_argument("--version", action="version", version=f"jellysim {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    run = sub.add_parser("run", help="simulate a scene (preset name or TOML file)")
+    run.add_argument("scene", help="preset name (see 'jellysim presets') or path to a .toml")
+    run.add_argument("--out", help="output folder (default: out/<scene name>)")
+    run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a scene key, VALUE read as TOML (repeatable)")
+    run.add_argument("--resume", action="store_true", help="continue a killed run")
+    run.add_argument("--force", action="store_true", help="replace an existing result")
+    run.add_argument("--quiet", action="store_true", help="no progress and no messages")
+
+    plot = sub.add_parser("plot", help="the paper's figures for a result")
+    plot.add_argument("dir", help="folder holding result.h5")
+    plot.add_argument("--out", help="folder for the figures (default: DIR/plots)")
+
+    sub.add_parser("presets", help="list the presets")
+    show = sub.add_parser("show", help="print a preset's TOML")
+    show.add_argument("name")
+    return parser
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from jellysim.config import load_scene
+    from jellysim.simulation import run
+
+    scene = load_scene(args.scene, args.overrides)
+    if not args.quiet:
+        logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+    try:
+        result = run(scene, args.out, force=args.force, resume=args.resume, quiet=args.quiet)
+    except SimulationUnstable:
+        raise
+    with result:
+        if not args.quiet:
+            print(f"wrote {result.path} ({result.frames} frames)")
     return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from jellysim.io.plots import plot_result
+    from jellysim.io.result import open_result
+
+    with open_result(args.dir) as result:
+        folder = Path(args.out) if args.out else None
+        try:
+            paths = plot_result(result, folder)
+        except OSError as err:
+            raise InputError(f"cannot write the figures: {err}") from None
+    for path in paths:
+        print(path)
+    return 0
+
+
+def _cmd_presets(args: argparse.Namespace) -> int:
+    from jellysim.species import preset_names, preset_summary
+
+    names = preset_names()
+    width = max(map(len, names))
+    for name in names:
+        print(f"{name:<{width}}  {preset_summary(name)}")
+    return 0
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from jellysim.config.load import _suggest
+    from jellysim.species import preset_names, preset_text
+
+    if args.name not in preset_names():
+        raise InputError(
+            f"unknown preset '{args.name}'{_suggest(args.name, preset_names())}; "
+            f"presets: {', '.join(preset_names())}"
+        )
+    sys.stdout.write(preset_text(args.name))
+    return 0
+
+
+COMMANDS = {"run": _cmd_run, "plot": _cmd_plot, "presets": _cmd_presets, "show": _cmd_show}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except SimulationUnstable as err:
+        print(f"jellysim: {err}", file=sys.stderr)
+        print("jellysim: every frame written before stays readable", file=sys.stderr)
+        return err.exit_status
+    except JellysimError as err:
+        print(f"jellysim: error: {err}", file=sys.stderr)
+        return err.exit_status
+    except KeyboardInterrupt:
+        print("jellysim: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # one line, no traceback, unless asked for
+        if os.environ.get("JELLYSIM_DEBUG"):
+            raise
+        print(f"jellysim: internal error: {type(err).__name__}: {err} "
+              "(set JELLYSIM_DEBUG=1 for the traceback)", file=sys.stderr)
+        return 1

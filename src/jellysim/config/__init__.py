@@ -7,8 +7,8 @@ from jellysim.config.load import (
     scene_to_toml,
     scene_to_tree,
 )
-from jellysim.config.schema import Scene
 from jellysim.config.scenes import load_scene, scene_source_tree
+from jellysim.config.schema import Scene
 
 __all__ = [
     "Scene",

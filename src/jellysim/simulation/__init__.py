@@ -24,7 +24,7 @@ from jellysim.io.checkpoint import load_checkpoint, remove_checkpoint, save_chec
 from jellysim.io.result import RESULT_FILE, Result, ResultWriter, frame_datasets, read_frames
 from jellysim.tentacle.flow import flow_noise_for, water_velocity
 from jellysim.tentacle.kernels import advance_frame
-from jellysim.tentacle.model import characteristic_speed, chain_model_for, medium_for, plan_substeps
+from jellysim.tentacle.model import chain_model_for, characteristic_speed, medium_for, plan_substeps
 
 log = logging.getLogger(__name__)
 
