@@ -19,8 +19,14 @@ Z_AXIS = np.array([0.0, 0.0, 1.0])
 class ForcedRoots:
     """Roots on a still margin, oscillated forcibly (:class:`jellysim.bell.RootDriver`)."""
 
-    def __init__(self, radius: float, count: int, amplitude: float, frequency: float,
-                 direction: str | tuple[float, float, float]) -> None:
+    def __init__(
+        self,
+        radius: float,
+        count: int,
+        amplitude: float,
+        frequency: float,
+        direction: str | tuple[float, float, float],
+    ) -> None:
         self.count = count
         self.radius = radius
         self.amplitude = amplitude
@@ -61,5 +67,6 @@ class ForcedRoots:
 @register("none")
 def _forced(scene: Scene) -> ForcedRoots:
     rm = scene.root_motion
-    return ForcedRoots(scene.bell.radius, scene.tentacles.count, rm.amplitude, rm.frequency,
-                       rm.direction)
+    return ForcedRoots(
+        scene.bell.radius, scene.tentacles.count, rm.amplitude, rm.frequency, rm.direction
+    )

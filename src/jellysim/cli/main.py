@@ -29,8 +29,14 @@ def _parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate a scene (preset name or TOML file)")
     run.add_argument("scene", help="preset name (see 'jellysim presets') or path to a .toml")
     run.add_argument("--out", help="output folder (default: out/<scene name>)")
-    run.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                     help="override a scene key, VALUE read as TOML (repeatable)")
+    run.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scene key, VALUE read as TOML (repeatable)",
+    )
     run.add_argument("--resume", action="store_true", help="continue a killed run")
     run.add_argument("--force", action="store_true", help="replace an existing result")
     run.add_argument("--quiet", action="store_true", help="no progress and no messages")
@@ -120,6 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as err:  # one line, no traceback, unless asked for
         if os.environ.get("JELLYSIM_DEBUG"):
             raise
-        print(f"jellysim: internal error: {type(err).__name__}: {err} "
-              "(set JELLYSIM_DEBUG=1 for the traceback)", file=sys.stderr)
+        print(
+            f"jellysim: internal error: {type(err).__name__}: {err} "
+            "(set JELLYSIM_DEBUG=1 for the traceback)",
+            file=sys.stderr,
+        )
         return 1

@@ -145,7 +145,9 @@ def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
         value = tree[name]
         if _is_section(f):
             if not isinstance(value, dict):
-                raise InputError(f"{prefix}{name} must be a table [{prefix}{name}], got {_show(value)}")
+                raise InputError(
+                    f"{prefix}{name} must be a table [{prefix}{name}], got {_show(value)}"
+                )
             kwargs[name] = _build(_section_type(cls, name), value, f"{prefix}{name}.")
         else:
             kwargs[name] = _check_value(prefix + name, value, f.metadata)
@@ -203,7 +205,9 @@ def parse_override(item: str) -> tuple[str, Any]:
         if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.+-]*", raw):
             value = raw
         else:
-            raise InputError(f"--set {key}: cannot read the value {raw!r} as a TOML value") from None
+            raise InputError(
+                f"--set {key}: cannot read the value {raw!r} as a TOML value"
+            ) from None
     return key, value
 
 

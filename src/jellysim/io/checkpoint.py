@@ -17,7 +17,9 @@ from jellysim.errors import InputError
 CHECKPOINT_FILE = "checkpoint.npz"
 
 
-def save_checkpoint(folder: Path, frame: int, scene_toml: str, state: dict[str, np.ndarray]) -> None:
+def save_checkpoint(
+    folder: Path, frame: int, scene_toml: str, state: dict[str, np.ndarray]
+) -> None:
     """Write the state after ``frame`` (0-based index of the last frame written)."""
     path = folder / CHECKPOINT_FILE
     temporary = folder / (CHECKPOINT_FILE + ".tmp")
@@ -32,7 +34,9 @@ def load_checkpoint(folder: Path, scene_toml: str) -> tuple[int, dict[str, np.nd
     """The last checkpoint of the run in ``folder``; it must belong to the same scene."""
     path = folder / CHECKPOINT_FILE
     if not path.is_file():
-        raise InputError(f"nothing to resume in '{folder}': no {CHECKPOINT_FILE} (run without --resume)")
+        raise InputError(
+            f"nothing to resume in '{folder}': no {CHECKPOINT_FILE} (run without --resume)"
+        )
     try:
         with np.load(path) as data:
             saved_scene = str(data["scene"])

@@ -51,8 +51,9 @@ def tentacle_shapes(result: Result, path: Path, snapshots: int = 6) -> Path:
     positions = result.file["tentacles/position"]
     margin = result.file["bell/margin"]
     time = result.time
-    fig, axes = plt.subplots(1, len(picks), figsize=(2.2 * len(picks), 4.4), dpi=120,
-                             sharex=True, sharey=True)
+    fig, axes = plt.subplots(
+        1, len(picks), figsize=(2.2 * len(picks), 4.4), dpi=120, sharex=True, sharey=True
+    )
     for ax, frame in zip(np.atleast_1d(axes), picks, strict=True):
         x = positions[frame]
         ring = np.vstack([margin[frame], margin[frame][:1]])

@@ -49,8 +49,13 @@ def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[D
 class ResultWriter:
     """Appends frames to ``result.h5`` in SWMR mode; every append is flushed to disk."""
 
-    def __init__(self, path: Path, datasets: list[Dataset], attributes: dict[str, Any],
-                 initial: dict[str, np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        path: Path,
+        datasets: list[Dataset],
+        attributes: dict[str, Any],
+        initial: dict[str, np.ndarray] | None = None,
+    ) -> None:
         """Create the file (replacing one there), optionally starting with ``initial`` frames."""
         self.path = path
         temporary = path.with_name(path.name + ".tmp")
@@ -119,7 +124,9 @@ class Result:
         folder = Path(folder)
         path = folder / RESULT_FILE if folder.is_dir() or folder.suffix != ".h5" else folder
         if not path.is_file():
-            raise InputError(f"no result at '{folder}': {path.name} not found (run 'jellysim run' first)")
+            raise InputError(
+                f"no result at '{folder}': {path.name} not found (run 'jellysim run' first)"
+            )
         try:
             self.file = _open(path)
         except OSError as err:
@@ -130,8 +137,12 @@ class Result:
     def __enter__(self) -> Result:
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
-                 traceback: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        value: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
         self.close()
 
     def close(self) -> None:

@@ -71,7 +71,9 @@ class Simulation:
         """Frame 0: every tentacle straight from its root along its clamp direction, at rest."""
         roots, root_velocities, directions = self.driver.roots(np.zeros(1))
         offsets = np.arange(self.scene.tentacles.particles) * self.scene.tentacles.spacing
-        self.positions[:] = roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
+        self.positions[:] = (
+            roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
+        )
         self.velocities[:] = 0.0
         self.velocities[:, 0] = root_velocities[0]
         self.frame = 0
@@ -96,8 +98,16 @@ class Simulation:
             self.noise.sample(times),
         )
         advance_frame(
-            self.positions, self.velocities, roots, root_velocities, directions, flow,
-            self.model, self.medium, self.plan.dt, self.diagnostics,
+            self.positions,
+            self.velocities,
+            roots,
+            root_velocities,
+            directions,
+            flow,
+            self.model,
+            self.medium,
+            self.plan.dt,
+            self.diagnostics,
         )
         self.frame += 1
         self._watchdog(times)
@@ -113,7 +123,8 @@ class Simulation:
                 f"unstable at t = {when:.6g} s in tentacle {chain}: the state became non-finite "
                 "or the length constraint could not be met; lower solver.dt_safety "
                 "or check the scene's forces",
-                time=when, tentacle=chain,
+                time=when,
+                tentacle=chain,
             )
         rms = np.sqrt(np.mean(np.sum(self.velocities**2, axis=2), axis=1))
         if not np.all(np.isfinite(rms)) or np.any(rms > self.speed_limit):
@@ -123,7 +134,8 @@ class Simulation:
                 f"runaway energy at t = {self.time:.6g} s in tentacle {chain}: RMS speed "
                 f"{rms[chain]:.3g} m/s exceeds {self.speed_limit:.3g} m/s; lower solver.dt_safety "
                 "or check the scene's forces",
-                time=self.time, tentacle=chain,
+                time=self.time,
+                tentacle=chain,
             )
 
     def frame_values(self) -> dict[str, Any]:
@@ -195,9 +207,7 @@ def run(
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--out {folder}: exists and is not a folder")
     if result_path.exists() and not (force or resume):
-        raise InputError(
-            f"{result_path} exists; --force replaces it, --resume continues it"
-        )
+        raise InputError(f"{result_path} exists; --force replaces it, --resume continues it")
     if resume and not result_path.exists():
         raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
 
@@ -230,8 +240,12 @@ def run(
 
     log.info(
         "%s: %d tentacles x %d particles, %s, %d frames -> %s",
-        scene.name, scene.tentacles.count, scene.tentacles.particles,
-        simulation.plan.describe(), scene.frame_count, result_path,
+        scene.name,
+        scene.tentacles.count,
+        scene.tentacles.particles,
+        simulation.plan.describe(),
+        scene.frame_count,
+        result_path,
     )
     every = scene.solver.checkpoint_every
     try:
@@ -241,7 +255,9 @@ def run(
                 writer.append(simulation.frame_values())
                 if simulation.frame % every == 0:
                     save_checkpoint(
-                        folder, simulation.frame, scene_toml,
+                        folder,
+                        simulation.frame,
+                        scene_toml,
                         {"positions": simulation.positions, "velocities": simulation.velocities},
                     )
                 bar.update(1)
@@ -267,5 +283,12 @@ def _progress(total: int, done: int, quiet: bool) -> Any:
         return _NoBar()
     from tqdm import tqdm
 
-    return tqdm(total=total, initial=done, unit="frame", delay=2.0, file=sys.stderr,
-                dynamic_ncols=True, desc="simulating")
+    return tqdm(
+        total=total,
+        initial=done,
+        unit="frame",
+        delay=2.0,
+        file=sys.stderr,
+        dynamic_ncols=True,
+        desc="simulating",
+    )

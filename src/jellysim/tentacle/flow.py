@@ -21,8 +21,9 @@ KNOTS_PER_CORRELATION_TIME = 4
 class FlowNoise:
     """Smooth seeded noise per tentacle: ``sample(times)`` gives (S, T, 3) m/s."""
 
-    def __init__(self, amplitude: float, correlation_time: float, duration: float, count: int,
-                 seed: int) -> None:
+    def __init__(
+        self, amplitude: float, correlation_time: float, duration: float, count: int, seed: int
+    ) -> None:
         self.amplitude = amplitude
         self.spacing = correlation_time / KNOTS_PER_CORRELATION_TIME
         n_knots = math.ceil(duration / self.spacing) + 4
@@ -58,12 +59,14 @@ class FlowNoise:
 
 def flow_noise_for(scene: Scene) -> FlowNoise:
     f = scene.flow
-    return FlowNoise(f.noise, f.noise_correlation_time, scene.duration, scene.tentacles.count,
-                     scene.seed)
+    return FlowNoise(
+        f.noise, f.noise_correlation_time, scene.duration, scene.tentacles.count, scene.seed
+    )
 
 
-def water_velocity(speed: float, axis: np.ndarray, bell_velocity: np.ndarray,
-                   noise: np.ndarray) -> np.ndarray:
+def water_velocity(
+    speed: float, axis: np.ndarray, bell_velocity: np.ndarray, noise: np.ndarray
+) -> np.ndarray:
     """World-frame water velocity at the tentacles, (S, T, 3) m/s, DESIGN §3."""
     uniform = bell_velocity - speed * axis  # (S, 3)
     return uniform[:, None, :] + noise

@@ -353,7 +353,13 @@ def advance_frame(
                     x[j + 1, k] = rhs[j, k]
             # Exact inextensibility, Eq. (T8).
             iterations = project_lengths(
-                x, model.inverse_mass, d, PROJECTION_TOLERANCE, PROJECTION_MAX_ITERATIONS, edges, work
+                x,
+                model.inverse_mass,
+                d,
+                PROJECTION_TOLERANCE,
+                PROJECTION_MAX_ITERATIONS,
+                edges,
+                work,
             )
             # Velocities from the displacement, Eq. (T9).
             for k in range(3):

@@ -122,9 +122,7 @@ def characteristic_speed(scene: Scene) -> float:
     """A speed scale (m/s) of the tentacles relative to the water."""
     rm = scene.root_motion
     return (
-        abs(scene.flow.speed)
-        + 3.0 * scene.flow.noise
-        + 2.0 * math.pi * rm.amplitude * rm.frequency
+        abs(scene.flow.speed) + 3.0 * scene.flow.noise + 2.0 * math.pi * rm.amplitude * rm.frequency
     )
 
 
