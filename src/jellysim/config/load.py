@@ -23,6 +23,9 @@ from jellysim.errors import InputError
 
 Tree = dict[str, Any]
 
+# TOML integers are 64-bit signed; larger ones cannot be stored (result attributes, checkpoints).
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
+
 
 def _suggest(name: str, candidates: Iterable[str]) -> str:
     close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
@@ -42,11 +45,21 @@ def _section_type(cls: type, name: str) -> type:
 
 
 def _show(value: Any) -> str:
+    """A value as the user wrote it (TOML spelling), on one line."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, str):
         return repr(value)
     if isinstance(value, dict):
         return "a table"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
     return str(value)
+
+
+def _quote(name: str) -> str:
+    """A key, preset name or path in quotes, escaped so that it stays on one line."""
+    return f"'{name}'" if name.isprintable() else repr(name)
 
 
 def _allowed(meta: Mapping[str, Any]) -> str:
@@ -88,7 +101,7 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
             )
         return value
     if kind == "str":
-        if not isinstance(value, str) or not re.match(meta.get("pattern", ".*"), value):
+        if not isinstance(value, str) or not re.fullmatch(meta.get("pattern", ".*"), value):
             raise bad()
         return value
     if kind == "bool":
@@ -112,11 +125,18 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
     if kind == "int":
         if isinstance(value, bool) or not isinstance(value, int):
             raise bad()
+        if not INT64_MIN <= value <= INT64_MAX:
+            raise InputError(
+                f"{key} = {value} is not allowed: expected {_allowed(meta)} (64-bit integer)"
+            )
         number: float = value
     else:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise bad()
-        number = float(value)
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond the float range
+            raise bad() from None
         if not math.isfinite(number):
             raise bad()
     if (
@@ -135,7 +155,7 @@ def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
         if key not in fields:
             where = f"[{prefix[:-1]}]" if prefix else "the scene"
             raise InputError(
-                f"unknown key '{prefix}{key}' in {where}{_suggest(key, fields)}; "
+                f"unknown key {_quote(prefix + key)} in {where}{_suggest(key, fields)}; "
                 f"allowed: {', '.join(fields)}"
             )
     kwargs: dict[str, Any] = {}
@@ -177,6 +197,8 @@ def parse_toml(text: str, source: str) -> Tree:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         detail = str(err)
+        if detail.endswith("(at end of document)"):  # tomllib gives no line there: the last one
+            detail = detail[: -len(")")] + f", line {max(1, len(text.splitlines()))})"
         raise InputError(f"{source}: TOML syntax error: {detail}") from None
 
 
@@ -187,7 +209,7 @@ def read_scene_file(path: str | Path) -> Tree:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
-        raise InputError(f"cannot read scene file '{p}': {reason}") from None
+        raise InputError(f"cannot read scene file {_quote(str(p))}: {reason}") from None
     return parse_toml(text, str(p))
 
 
@@ -206,7 +228,7 @@ def parse_override(item: str) -> tuple[str, Any]:
             value = raw
         else:
             raise InputError(
-                f"--set {key}: cannot read the value {raw!r} as a TOML value"
+                f"--set {_quote(key)}: cannot read the value {raw!r} as a TOML value"
             ) from None
     return key, value
 
@@ -225,7 +247,7 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
                 where = f"[{prefix}]" if prefix else "the scene"
                 full = ".".join([*parts[:depth], part])
                 raise InputError(
-                    f"unknown key '{full}' in {where}{_suggest(part, fields)}; "
+                    f"unknown key {_quote(full)} in {where}{_suggest(part, fields)}; "
                     f"allowed: {', '.join(fields)}"
                 )
             f = fields[part]
@@ -235,6 +257,9 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
                     raise InputError(f"--set {dotted}: '{dotted}' is a table; set one of its keys")
                 cls = _section_type(cls, part)
                 node = node.setdefault(part, {})
+                if not isinstance(node, dict):
+                    name = ".".join(parts[: depth + 1])
+                    raise InputError(f"{name} must be a table [{name}], got {_show(node)}")
             else:
                 if not last:
                     raise InputError(f"--set {dotted}: '{part}' is a value, not a table")

@@ -8,6 +8,8 @@ from typing import Any
 
 from jellysim.config.load import (
     Tree,
+    _quote,
+    _suggest,
     apply_overrides,
     parse_override,
     read_scene_file,
@@ -26,10 +28,8 @@ def scene_source_tree(source: str | Path) -> Tree:
     path = Path(text)
     if path.suffix.lower() == ".toml" or path.exists() or "/" in text:
         return read_scene_file(path)
-    from jellysim.config.load import _suggest
-
     raise InputError(
-        f"unknown preset '{text}'{_suggest(text, preset_names())}; "
+        f"unknown preset {_quote(text)}{_suggest(text, preset_names())}; "
         f"presets: {', '.join(preset_names())} (or give a .toml file)"
     )
 

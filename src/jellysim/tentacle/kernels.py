@@ -1,16 +1,22 @@
-"""Compiled kernels of the tentacle model (paper §4.1; equations numbered as in docs/theory/tentacle.md).
+"""Compiled kernels of the tentacle model (paper §4.1; equations in docs/theory/tentacle.md).
 
 A tentacle is a chain of P particles at spacing d, root first. Arrays are float64:
 positions and velocities ``(T, P, 3)`` in m and m/s for T chains. The root (particle 0) is
-prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T7-T9):
+prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T6-T9):
 
-1. drag gain ``k_i`` from the relative velocity at the start of the step (Eq. T4-T5),
-2. backward-Euler solve of ``(M + dt K_d + dt^2 c K) x* = M (x + dt v) + dt K_d x + dt^2 (f + K_d u)``
-   for the free particles: bending (Eq. T2) and drag implicit, a pentadiagonal Cholesky solve in
-   O(P), plus a rank-one (Sherman-Morrison) term for the clamped root,
-3. exact projection of x* onto the segment-length constraints ``|x_{i+1} - x_i| = d`` by Newton
-   iterations on a tridiagonal system (fast projection), O(P) each,
-4. ``v = (x_new - x_old) / dt``.
+1. drag gain ``k_i`` from the relative velocity at the start of the step (Eq. T5),
+2. one backward-Euler step of bending (Eq. T2) and drag, constrained by the segment lengths
+   linearised at the start of the step: the saddle-point (KKT) system
+   ``[A  J^T; J  0] [x; lambda] = [M (x + dt v) + dt K_d x + dt^2 (f + K_d u); d]`` with
+   ``A = M + dt K_d + dt^2 c K``, interleaved per particle into a band of half-width 10 and
+   solved by a banded LDL^T factorisation in O(P) (Eq. T7),
+3. exact projection onto ``|x_{i+1} - x_i| = d`` by Newton iterations of the fast projection
+   on a tridiagonal system, O(P) each; it only removes the linearisation's second-order error
+   (Eq. T8),
+4. ``v = (x_new - x_old) / dt`` (Eq. T9).
+
+Solving bending and the constraints together keeps the scheme consistent at any dt: at rest its
+fixed point is the exact static equilibrium of the discrete chain.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ class ChainModel(NamedTuple):
     ``stiffness_diag``, ``stiffness_off1``, ``stiffness_off2``: ``(P-1,)`` bands of the
     dimensionless bending matrix K over the free particles (force = -c K x).
     ``root_coupling``: ``(2,)`` K entries coupling free particles 1 and 2 to the root.
+    ``free_root``: the root is a free particle too (a detached chain; bands then span all P).
     """
 
     mass: np.ndarray
@@ -44,6 +51,7 @@ class ChainModel(NamedTuple):
     bending_stiffness: float  # c = 48 E I / L^3, N/m (Eq. T2)
     clamped: bool
     spacing: float  # d, m
+    free_root: bool
 
 
 class Medium(NamedTuple):
@@ -130,50 +138,44 @@ def bending_forces(
             out[0, k] += f
 
 
-@njit(cache=True)
-def _penta_solve(
-    diag: np.ndarray,
-    off1: np.ndarray,
-    off2: np.ndarray,
-    rhs: np.ndarray,
-    l0: np.ndarray,
-    l1: np.ndarray,
-    l2: np.ndarray,
-) -> None:
-    """Solve a symmetric positive definite pentadiagonal system in place (banded Cholesky).
+KKT_BLOCK = 4  # unknowns per particle in the saddle-point system: x, y, z and one multiplier
+KKT_HALF_BANDWIDTH = 10  # x_i couples to x_{i+2}: 2 blocks + 2 components
 
-    ``A[i, i] = diag[i]``, ``A[i, i+1] = off1[i]``, ``A[i, i+2] = off2[i]``; ``rhs`` (n, m) is
-    overwritten by the solution. ``l0, l1, l2`` (n,) are scratch for the factor's bands.
+
+@njit(cache=True, fastmath=True)
+def _band_ldlt_solve(band: np.ndarray, pivots: np.ndarray, rhs: np.ndarray) -> None:
+    """Solve a symmetric banded system in place by LDL^T without pivoting.
+
+    ``band[r, s] = A[r, r - s]`` (s = 0..b, the lower band) is overwritten by L; ``pivots`` (N,)
+    receives D; ``rhs`` (N,) is overwritten by the solution. The saddle-point systems solved
+    here are ordered so that each multiplier follows the particle it constrains, which keeps the
+    pivots of the particles positive and those of the multipliers negative.
     """
-    n = diag.shape[0]
+    n = band.shape[0]
+    b = band.shape[1] - 1
+    for j in range(n):
+        s = band[j, 0]
+        for k in range(max(0, j - b), j):
+            ljk = band[j, j - k]
+            s -= ljk * ljk * pivots[k]
+        pivots[j] = s
+        for i in range(j + 1, min(n, j + b + 1)):
+            s = band[i, i - j]
+            for k in range(max(0, i - b), j):
+                s -= band[i, i - k] * band[j, j - k] * pivots[k]
+            band[i, i - j] = s / pivots[j]
     for i in range(n):
-        a2 = off2[i - 2] / l0[i - 2] if i >= 2 else 0.0
-        a1 = 0.0
-        if i >= 1:
-            a1 = off1[i - 1]
-            if i >= 2:
-                a1 -= a2 * l1[i - 1]
-            a1 /= l0[i - 1]
-        l2[i] = a2
-        l1[i] = a1
-        l0[i] = math.sqrt(diag[i] - a2 * a2 - a1 * a1)
-    m = rhs.shape[1]
+        s = rhs[i]
+        for k in range(max(0, i - b), i):
+            s -= band[i, i - k] * rhs[k]
+        rhs[i] = s
     for i in range(n):
-        for k in range(m):
-            s = rhs[i, k]
-            if i >= 1:
-                s -= l1[i] * rhs[i - 1, k]
-            if i >= 2:
-                s -= l2[i] * rhs[i - 2, k]
-            rhs[i, k] = s / l0[i]
+        rhs[i] /= pivots[i]
     for i in range(n - 1, -1, -1):
-        for k in range(m):
-            s = rhs[i, k]
-            if i + 1 < n:
-                s -= l1[i + 1] * rhs[i + 1, k]
-            if i + 2 < n:
-                s -= l2[i + 2] * rhs[i + 2, k]
-            rhs[i, k] = s / l0[i]
+        s = rhs[i]
+        for k in range(i + 1, min(n, i + b + 1)):
+            s -= band[k, k - i] * rhs[k]
+        rhs[i] = s
 
 
 @njit(cache=True)
@@ -277,26 +279,23 @@ def advance_frame(
     """
     n_chains = positions.shape[0]
     n_particles = positions.shape[1]
-    n_free = n_particles - 1
+    first = 0 if model.free_root else 1  # first free particle
+    n_free = n_particles - first
+    n_segments = n_particles - 1
+    n_unknowns = KKT_BLOCK * n_free
     n_substeps = root_positions.shape[0]
     c = model.bending_stiffness
     d = model.spacing
     dt2c = dt * dt * c
-    half_dt2c = 0.5 * dt2c
     for t in prange(n_chains):
         x = positions[t]
         v = velocities[t]
-        diag = np.empty(n_free)
-        off1 = dt2c * model.stiffness_off1
-        off2 = dt2c * model.stiffness_off2
-        rhs = np.empty((n_free, 3))
-        ghost = np.empty((n_free, 1))
-        l0 = np.empty(n_free)
-        l1 = np.empty(n_free)
-        l2 = np.empty(n_free)
+        band = np.empty((n_unknowns, KKT_HALF_BANDWIDTH + 1))
+        pivots = np.empty(n_unknowns)
+        rhs = np.empty(n_unknowns)
         old = np.empty((n_particles, 3))
-        edges = np.empty((n_free, 3))
-        work = np.empty((4, n_free))
+        edges = np.empty((n_segments, 3))
+        work = np.empty((4, n_segments))
         worst_error = 0.0
         most_iterations = 0
         failed_at = -1
@@ -305,9 +304,11 @@ def advance_frame(
             r = root_positions[s, t]
             tdir = root_directions[s, t]
             old[:] = x
-            # Assemble the backward-Euler system of the free particles, Eq. (T7).
-            for j in range(n_free):
-                i = j + 1
+            band[:] = 0.0
+            # Assemble the saddle-point system, Eq. (T7); particle i is block q = i - first.
+            for q in range(n_free):
+                i = q + first
+                row = KKT_BLOCK * q
                 rel0 = u[0] - v[i, 0]
                 rel1 = u[1] - v[i, 1]
                 rel2 = u[2] - v[i, 2]
@@ -319,38 +320,56 @@ def advance_frame(
                 )
                 m = model.mass[i]
                 buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
-                diag[j] = m + dt * k_drag + dt2c * model.stiffness_diag[j]
+                diagonal = m + dt * k_drag + dt2c * model.stiffness_diag[q]
                 for k in range(3):
-                    rhs[j, k] = (
+                    band[row + k, 0] = diagonal
+                    if q >= 1:
+                        band[row + k, KKT_BLOCK] = dt2c * model.stiffness_off1[q - 1]
+                    if q >= 2:
+                        band[row + k, 2 * KKT_BLOCK] = dt2c * model.stiffness_off2[q - 2]
+                    rhs[row + k] = (
                         m * (x[i, k] + dt * v[i, k])
                         + dt * k_drag * x[i, k]
                         + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
                     )
-            # The prescribed root enters through the bending coupling, Eq. (T7).
-            for k in range(3):
-                rhs[0, k] -= dt2c * model.root_coupling[0] * r[k]
-                if n_free > 1:
-                    rhs[1, k] -= dt2c * model.root_coupling[1] * r[k]
-            if model.clamped:
-                along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
+                # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its direction.
+                lam = row + 3
+                if i == 0:  # a free root has no segment before it: a decoupled dummy
+                    band[lam, 0] = -1.0
+                    rhs[lam] = 0.0
+                    continue
+                e0 = x[i, 0] - x[i - 1, 0]
+                e1 = x[i, 1] - x[i - 1, 1]
+                e2 = x[i, 2] - x[i - 1, 2]
+                inv = 1.0 / math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                normal = (e0 * inv, e1 * inv, e2 * inv)
+                rhs[lam] = d
                 for k in range(3):
-                    rhs[0, k] -= half_dt2c * along * tdir[k]
-            _penta_solve(diag, off1, off2, rhs, l0, l1, l2)
-            if model.clamped:
-                # Sherman-Morrison for the clamp's rank-one part -(dt^2 c / 2) t t^T at particle 1.
-                ghost[:] = 0.0
-                ghost[0, 0] = 1.0
-                _penta_solve(diag, off1, off2, ghost, l0, l1, l2)
-                ty = tdir[0] * rhs[0, 0] + tdir[1] * rhs[0, 1] + tdir[2] * rhs[0, 2]
-                factor = half_dt2c * ty / (1.0 - half_dt2c * ghost[0, 0])
-                for j in range(n_free):
+                    band[lam, 3 - k] = normal[k]
+                    if i - 1 >= first:
+                        band[lam, 7 - k] = -normal[k]
+                if i - 1 < first:  # the segment from the prescribed root
+                    rhs[lam] += normal[0] * r[0] + normal[1] * r[1] + normal[2] * r[2]
+            if first == 1:
+                # The prescribed root enters through the bending coupling, Eq. (T7).
+                for k in range(3):
+                    rhs[k] -= dt2c * model.root_coupling[0] * r[k]
+                    if n_free > 1:
+                        rhs[KKT_BLOCK + k] -= dt2c * model.root_coupling[1] * r[k]
+                if model.clamped:
+                    # The clamp's part along t: -(c/2) t t^T on particle 1, Eq. (T3).
+                    along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
                     for k in range(3):
-                        rhs[j, k] += factor * ghost[j, 0] * tdir[k]
-            for k in range(3):
-                x[0, k] = r[k]
-            for j in range(n_free):
+                        rhs[k] -= 0.5 * dt2c * along * tdir[k]
+                        for kk in range(k + 1):
+                            band[k, k - kk] -= 0.5 * dt2c * tdir[k] * tdir[kk]
+            _band_ldlt_solve(band, pivots, rhs)
+            if first == 1:
                 for k in range(3):
-                    x[j + 1, k] = rhs[j, k]
+                    x[0, k] = r[k]
+            for q in range(n_free):
+                for k in range(3):
+                    x[q + first, k] = rhs[KKT_BLOCK * q + k]
             # Exact inextensibility, Eq. (T8).
             iterations = project_lengths(
                 x,
@@ -362,10 +381,11 @@ def advance_frame(
                 work,
             )
             # Velocities from the displacement, Eq. (T9).
-            for k in range(3):
-                v[0, k] = root_velocities[s, t, k]
+            if first == 1:
+                for k in range(3):
+                    v[0, k] = root_velocities[s, t, k]
             finite = True
-            for i in range(1, n_particles):
+            for i in range(first, n_particles):
                 for k in range(3):
                     v[i, k] = (x[i, k] - old[i, k]) / dt
                     if not math.isfinite(v[i, k]):
@@ -374,7 +394,7 @@ def advance_frame(
                 failed_at = s
                 break
             most_iterations = max(most_iterations, iterations)
-            for j in range(n_free):
+            for j in range(n_segments):
                 length = math.sqrt(edges[j, 0] ** 2 + edges[j, 1] ** 2 + edges[j, 2] ** 2)
                 worst_error = max(worst_error, abs(length / d - 1.0))
         diagnostics[t, 0] = worst_error

@@ -60,17 +60,26 @@ def build_chain_model(
     bending: str = "euler-bernoulli",
     root: str = "clamped",
 ) -> ChainModel:
-    """Lumped masses (interior: one segment pi d^3 / 4; tip: half) and the bending bands."""
+    """Lumped masses (interior: one segment pi d^3 / 4; tip: half) and the bending bands.
+
+    ``root`` is "clamped" or "pinned" (prescribed root), or "free": a detached chain whose root
+    is a free end like the tip (used to test falling and momentum conservation).
+    """
     segment_volume = math.pi * spacing**3 / 4.0
     volume = np.full(particles, segment_volume)
     volume[-1] = 0.5 * segment_volume
+    free_root = root == "free"
+    if free_root:
+        volume[0] = 0.5 * segment_volume
     mass = tentacle_density * volume
     inverse_mass = 1.0 / mass
-    inverse_mass[0] = 0.0  # the root is prescribed
+    if not free_root:
+        inverse_mass[0] = 0.0  # the root is prescribed
     clamped = root == "clamped"
     k = bending_matrix(particles, clamped)
-    free = k[1:, 1:]
-    n = particles - 1
+    first = 0 if free_root else 1
+    free = k[first:, first:]
+    n = particles - first
     return ChainModel(
         mass=mass,
         inverse_mass=inverse_mass,
@@ -82,6 +91,7 @@ def build_chain_model(
         bending_stiffness=bending_stiffness(youngs_modulus, spacing, bending),
         clamped=clamped,
         spacing=float(spacing),
+        free_root=free_root,
     )
 
 

@@ -1,0 +1,211 @@
+"""Invalid input on the real command line: exit status 2, at most three lines naming the key and
+the value, no traceback, and nothing written (DESIGN §3)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from jellysim.cli.main import main
+
+PRESET = "brown-jelly"
+TINY = ("--set", "duration=0.1", "--quiet")  # a valid run of four frames
+
+
+def jellysim(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if k != "JELLYSIM_DEBUG"}
+    env["COLUMNS"] = "80"  # argparse wraps its usage at the terminal width
+    return subprocess.run(
+        [sys.executable, "-m", "jellysim", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def snapshot(folder: Path) -> dict[str, bytes | None]:
+    """Every path under ``folder`` with its bytes (None for folders)."""
+    return {
+        str(p.relative_to(folder)): None if p.is_dir() else p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+    }
+
+
+def assert_rejected(
+    status: int, stdout: str, stderr: str, named: tuple[str, ...], out: Path
+) -> None:
+    lines = stderr.strip().splitlines()
+    assert status == 2, stderr
+    assert 1 <= len(lines) <= 3, stderr
+    assert "Traceback" not in stderr
+    for text in named:
+        assert text in stderr, f"{text!r} not in {stderr!r}"
+    assert stdout == ""
+    assert not out.exists(), f"{out} was written"
+
+
+def check_subprocess(tmp_path: Path, args: tuple[str, ...], named: tuple[str, ...]) -> None:
+    before = snapshot(tmp_path)
+    proc = jellysim(tmp_path, *args, "--out", "out")
+    assert_rejected(proc.returncode, proc.stdout, proc.stderr, named, tmp_path / "out")
+    assert snapshot(tmp_path) == before
+
+
+# (arguments after 'run', texts that stderr must contain)
+SET_CASES = {
+    "unknown-key": (("--set", "durtion=2"), ("durtion", "did you mean 'duration'")),
+    "unknown-nested-key": (("--set", "tentacles.cout=3"), ("tentacles.cout", "'count'")),
+    "unknown-table": (("--set", "tentacle.count=3"), ("tentacle", "did you mean 'tentacles'")),
+    "string-for-number": (("--set", "tentacles.spacing=abc"), ("tentacles.spacing", "'abc'")),
+    "float-for-int": (("--set", "tentacles.count=2.5"), ("tentacles.count = 2.5", "integer")),
+    "gravity-of-two": (("--set", "water.gravity=[0, -9.81]"), ("water.gravity", "[0, -9.81]")),
+    "bool-for-float": (("--set", "water.density=true"), ("water.density = true",)),
+    "too-few-particles": (("--set", "tentacles.particles=2"), ("tentacles.particles = 2", ">= 3")),
+    "bad-choice": (("--set", "tentacles.bending=ewin"), ("tentacles.bending", "'ewing'")),
+    "huge-int": (("--set", "seed=" + "9" * 30), ("seed", "9" * 30)),
+    "set-without-equals": (("--set", "duration"), ("duration", "KEY=VALUE")),
+    "set-a-table": (("--set", "tentacles=3"), ("tentacles", "table")),
+    "set-below-a-value": (("--set", "duration.x=3"), ("duration", "not a table")),
+    "unreadable-value": (("--set", "duration=1.2.3"), ("duration", "1.2.3")),
+    "nothing-to-resume": (("--resume",), ("nothing to resume", "result.h5")),
+    "force-and-resume": (("--force", "--resume"), ("--force", "--resume")),
+}
+
+
+@pytest.mark.parametrize(("args", "named"), SET_CASES.values(), ids=SET_CASES)
+def test_bad_option(tmp_path: Path, args: tuple[str, ...], named: tuple[str, ...]) -> None:
+    check_subprocess(tmp_path, ("run", PRESET, *args), named)
+
+
+# (file name, its TOML text or None for a folder, texts that stderr must contain)
+FILE_CASES = {
+    "unknown-nested-key": (
+        "scene.toml",
+        "[tentacles]\ncout = 3\n",
+        ("tentacles.cout", "did you mean 'count'"),
+    ),
+    "unknown-table": ("scene.toml", "[tentcles]\ncount = 3\n", ("tentcles", "'tentacles'")),
+    "unknown-top-level-key": ("scene.toml", "fsp = 30\n", ("fsp", "did you mean 'fps'")),
+    "string-for-number": ("scene.toml", '[water]\ndensity = "heavy"\n', ("water.density",)),
+    "table-as-value": ("scene.toml", "tentacles = 3\n", ("tentacles", "table")),
+    "syntax-error": ("bad.toml", "duration = 1\nfps = = 3\n", ("bad.toml", "line 2")),
+    "syntax-error-at-end": ("bad.toml", "[water]\ngravity = [0, 0,\n", ("bad.toml", "line 2")),
+    "not-utf8": ("latin.toml", b'name = "caf\xe9"\n', ("latin.toml",)),
+    "directory": ("dir.toml", None, ("dir.toml",)),
+}
+
+
+@pytest.mark.parametrize(("name", "content", "named"), FILE_CASES.values(), ids=FILE_CASES)
+def test_bad_scene_file(
+    tmp_path: Path, name: str, content: str | bytes | None, named: tuple[str, ...]
+) -> None:
+    path = tmp_path / name
+    if content is None:
+        path.mkdir()
+    elif isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content, encoding="utf-8")
+    check_subprocess(tmp_path, ("run", name), named)
+
+
+def test_missing_scene_file(tmp_path: Path) -> None:
+    check_subprocess(tmp_path, ("run", "missing.toml"), ("missing.toml", "No such file"))
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root reads any file")
+def test_unreadable_scene_file(tmp_path: Path) -> None:
+    path = tmp_path / "secret.toml"
+    path.write_text("duration = 1\n", encoding="utf-8")
+    path.chmod(0)
+    try:
+        check_subprocess(tmp_path, ("run", "secret.toml"), ("secret.toml", "ermission"))
+    finally:
+        path.chmod(0o600)
+
+
+def test_unknown_preset(tmp_path: Path) -> None:
+    check_subprocess(tmp_path, ("run", "brown-jely"), ("brown-jely", "did you mean 'brown-jelly'"))
+
+
+def test_override_below_a_table_written_as_a_value(tmp_path: Path) -> None:
+    (tmp_path / "scene.toml").write_text("tentacles = 3\n", encoding="utf-8")
+    check_subprocess(
+        tmp_path, ("run", "scene.toml", "--set", "tentacles.count=2"), ("tentacles", "table")
+    )
+
+
+# Out-of-range numbers: in process (the same main() the subprocesses run; start-up costs ~1 s).
+BOUNDED_KEYS = (
+    "tentacles.spacing",
+    "tentacles.youngs_modulus",
+    "water.density",
+    "tentacles.density",
+    "duration",
+)
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "-inf"])
+@pytest.mark.parametrize("key", BOUNDED_KEYS)
+def test_out_of_range_number(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    key: str,
+    value: str,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    status = main(["run", PRESET, "--set", f"{key}={value}", "--out", "out"])
+    captured = capsys.readouterr()
+    assert_rejected(
+        status, captured.out, captured.err, (f"{key} = {value}", "> 0"), tmp_path / "out"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("key", BOUNDED_KEYS)
+def test_out_of_range_number_subprocess(tmp_path: Path, key: str) -> None:
+    check_subprocess(tmp_path, ("run", PRESET, "--set", f"{key}=nan"), (f"{key} = nan",))
+
+
+def test_out_is_a_file(tmp_path: Path) -> None:
+    (tmp_path / "out").write_text("mine\n", encoding="utf-8")
+    before = snapshot(tmp_path)
+    proc = jellysim(tmp_path, "run", PRESET, *TINY, "--out", "out")
+    assert proc.returncode == 2, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) <= 3
+    assert "Traceback" not in proc.stderr and "out" in proc.stderr
+    assert snapshot(tmp_path) == before
+
+
+def test_existing_result_is_not_overwritten(tmp_path: Path) -> None:
+    first = jellysim(tmp_path, "run", PRESET, *TINY, "--out", "out")
+    assert first.returncode == 0, first.stderr
+    result = tmp_path / "out" / "result.h5"
+    assert result.is_file()
+    before = snapshot(tmp_path)
+    mtime = result.stat().st_mtime_ns
+
+    again = jellysim(tmp_path, "run", PRESET, *TINY, "--out", "out")
+    assert again.returncode == 2, again.stderr
+    assert len(again.stderr.strip().splitlines()) <= 3
+    assert "Traceback" not in again.stderr
+    assert "result.h5" in again.stderr and "--force" in again.stderr
+    assert snapshot(tmp_path) == before
+    assert result.stat().st_mtime_ns == mtime
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="cli/main.py _Parser.error prints argparse's usage of 'run', which wraps to 3 lines "
+    "at 80 columns, so a missing argument gives 4 lines of stderr",
+)
+def test_argparse_errors_fit_three_lines(tmp_path: Path) -> None:
+    proc = jellysim(tmp_path, "run", "--out", "out")
+    assert_rejected(proc.returncode, proc.stdout, proc.stderr, ("scene",), tmp_path / "out")

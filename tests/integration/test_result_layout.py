@@ -1,0 +1,253 @@
+"""result.h5 follows the layout of DESIGN §3: shapes, units, attributes, frame times and the
+geometric invariants the readers rely on (roots on the rim, rim on the margin, inextensible
+chains), and runs are reproducible from the seed."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import jellysim
+
+# Short runs of the brown-jelly preset (bell.model = "none", forced radial roots).
+BASE = {
+    "duration": 1.01,  # duration * fps = 20.2: F = round(20.2) + 1 = 21
+    "fps": 20.0,
+    "tentacles.count": 3,
+    "tentacles.particles": 20,
+}
+
+# DESIGN §3: per-frame datasets, their trailing shape (names stand for sizes) and units.
+PER_FRAME = {
+    "time": ((), "s"),
+    "tentacles/position": (("T", "P", 3), "m"),
+    "tentacles/velocity": (("T", "P", 3), "m/s"),
+    "bell/rim": (("T", 3), "m"),
+    "bell/rim_velocity": (("T", 3), "m/s"),
+    "bell/margin": (("R", 3), "m"),
+    "bell/position": (("B", 3), "m"),
+    "bell/surface_vertices": (("V", 3), "m"),
+    "fluid/position": (("N", "D"), "m"),
+    "fluid/velocity": (("N", "D"), "m/s"),
+    "fluid/pressure": (("N",), "Pa"),
+    "fluid/number_density": (("N",), None),
+    "fluid/alive": (("N",), None),
+    "solver/iterations": ((), None),
+}
+
+
+def _run(folder: Path, overrides: dict[str, object]) -> jellysim.Scene:
+    scene = jellysim.load_scene("brown-jelly", {**BASE, **overrides})
+    jellysim.run(scene, folder, force=True).close()
+    return scene
+
+
+def _datasets(f: h5py.File) -> dict[str, np.ndarray]:
+    found: dict[str, np.ndarray] = {}
+
+    def visit(name: str, obj: object) -> None:
+        if isinstance(obj, h5py.Dataset):
+            found[name] = obj[()]
+
+    f.visititems(visit)
+    return found
+
+
+@pytest.fixture(scope="module")
+def brown(tmp_path_factory: pytest.TempPathFactory) -> tuple[jellysim.Scene, Path]:
+    folder = tmp_path_factory.mktemp("layout")
+    return _run(folder, {}), folder
+
+
+def test_per_frame_datasets_have_the_design_shapes(brown: tuple[jellysim.Scene, Path]) -> None:
+    scene, folder = brown
+    t = scene.tentacles
+    frames = round(scene.duration * scene.fps) + 1
+    assert frames == 21 == scene.frame_count
+    with jellysim.open_result(folder) as r:
+        f = r.file
+        for name in ("time", "tentacles/position", "tentacles/velocity", "bell/rim",
+                     "bell/rim_velocity", "bell/margin"):
+            assert name in f, f"{name} missing from result.h5"
+        assert f["time"].shape == (frames,)
+        assert f["tentacles/position"].shape == (frames, t.count, t.particles, 3)
+        assert f["tentacles/velocity"].shape == (frames, t.count, t.particles, 3)
+        assert f["bell/rim"].shape == (frames, t.count, 3)
+        assert f["bell/rim_velocity"].shape == (frames, t.count, 3)
+        margin = f["bell/margin"]
+        assert margin.ndim == 3 and margin.shape[0] == frames and margin.shape[2] == 3
+        assert margin.shape[1] >= t.count
+        sizes = {"T": t.count, "P": t.particles}
+        for name, (trailing, _) in PER_FRAME.items():
+            if name not in f:
+                continue
+            shape = f[name].shape
+            assert shape[0] == frames, f"{name}: {shape[0]} frames, expected {frames}"
+            assert len(shape) == 1 + len(trailing), f"{name}: shape {shape}"
+            for size, want in zip(shape[1:], trailing, strict=True):
+                expected = sizes.setdefault(want, size) if isinstance(want, str) else want
+                assert size == expected, f"{name}: shape {shape}, expected {trailing}"
+        if "bell/surface_faces" in f:
+            faces = f["bell/surface_faces"][()]
+            assert faces.ndim == 2 and faces.shape[1] == 3
+            if "bell/surface_vertices" in f:
+                assert faces.min() >= 0
+                assert faces.max() < f["bell/surface_vertices"].shape[1]
+
+
+def test_every_dataset_carries_its_units(brown: tuple[jellysim.Scene, Path]) -> None:
+    _, folder = brown
+    with jellysim.open_result(folder) as r:
+        names = list(_datasets(r.file))
+        assert names
+        for name in names:
+            units = r.file[name].attrs.get("units")
+            assert units is not None, f"{name} has no 'units' attribute"
+            units = units.decode() if isinstance(units, bytes) else str(units)
+            assert units.strip(), f"{name} has an empty 'units' attribute"
+            expected = PER_FRAME.get(name, (None, None))[1]
+            if expected is not None:
+                assert units == expected, f"{name}: units {units!r}, expected {expected!r}"
+
+
+def test_root_attributes(brown: tuple[jellysim.Scene, Path]) -> None:
+    scene, folder = brown
+    with jellysim.open_result(folder) as r:
+        attrs = r.file.attrs
+        text = str(attrs["scene"])
+        assert jellysim.load_scene(tomllib.loads(text)) == scene
+        assert r.scene == scene
+        assert str(attrs["version"]) == jellysim.__version__
+        assert int(attrs["seed"]) == scene.seed
+
+
+def test_frame_times(brown: tuple[jellysim.Scene, Path]) -> None:
+    scene, folder = brown
+    with jellysim.open_result(folder) as r:
+        time = r.time
+    assert time.shape == (scene.frame_count,)
+    assert time[0] == 0.0
+    np.testing.assert_allclose(np.diff(time), 1.0 / scene.fps, rtol=1e-12)
+    np.testing.assert_allclose(time, np.arange(scene.frame_count) / scene.fps, rtol=1e-12)
+
+
+def test_all_values_finite(brown: tuple[jellysim.Scene, Path]) -> None:
+    _, folder = brown
+    with jellysim.open_result(folder) as r:
+        for name, data in _datasets(r.file).items():
+            if np.issubdtype(data.dtype, np.floating):
+                assert np.all(np.isfinite(data)), f"{name} holds non-finite values"
+
+
+def test_root_particle_follows_the_rim(brown: tuple[jellysim.Scene, Path]) -> None:
+    _, folder = brown
+    with jellysim.open_result(folder) as r:
+        positions, velocities = r.tentacle_positions, r.tentacle_velocities
+        rim, rim_velocity = r.rim, r.rim_velocity
+    np.testing.assert_allclose(positions[:, :, 0], rim, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(velocities[:, :, 0], rim_velocity, rtol=0, atol=1e-12)
+
+
+def test_rim_moves_by_the_forced_law(brown: tuple[jellysim.Scene, Path]) -> None:
+    """bell.model = none: roots on a circle at z = 0, moved by A sin(2 pi f t) radially."""
+    scene, folder = brown
+    with jellysim.open_result(folder) as r:
+        time, rim, rim_velocity = r.time, r.rim, r.rim_velocity
+    count, radius = scene.tentacles.count, scene.bell.radius
+    amplitude, frequency = scene.root_motion.amplitude, scene.root_motion.frequency
+    assert amplitude > 0.0
+    angles = 2.0 * np.pi * np.arange(count) / count
+    radial = np.stack([np.cos(angles), np.sin(angles), np.zeros(count)], axis=1)
+    phase = 2.0 * np.pi * frequency * time[:, None, None]
+    expected = radial * (radius + amplitude * np.sin(phase))
+    expected_velocity = radial * amplitude * 2.0 * np.pi * frequency * np.cos(phase)
+    np.testing.assert_allclose(rim, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rim_velocity, expected_velocity, rtol=0, atol=1e-12)
+
+
+def test_segment_lengths_equal_the_spacing(brown: tuple[jellysim.Scene, Path]) -> None:
+    scene, folder = brown
+    with jellysim.open_result(folder) as r:
+        positions = r.tentacle_positions
+    lengths = np.linalg.norm(np.diff(positions, axis=2), axis=3)
+    error = np.abs(lengths / scene.tentacles.spacing - 1.0)
+    assert error.max() <= 1e-6, f"segment length error {error.max():.3g} at frame " + str(
+        np.unravel_index(error.argmax(), error.shape)[0]
+    )
+
+
+def test_single_tentacle_hangs_from_radius_along_minus_z(tmp_path: Path) -> None:
+    scene = _run(tmp_path, {"bell.model": "none", "tentacles.count": 1})
+    radius, spacing = scene.bell.radius, scene.tentacles.spacing
+    particles = scene.tentacles.particles
+    with jellysim.open_result(tmp_path) as r:
+        x0 = r.tentacle_positions[0, 0]
+        v0 = r.tentacle_velocities[0, 0]
+        rim0 = r.rim[0, 0]
+    np.testing.assert_allclose(rim0, [radius, 0.0, 0.0], rtol=0, atol=1e-15)
+    expected = np.zeros((particles, 3))
+    expected[:, 0] = radius
+    expected[:, 2] = -spacing * np.arange(particles)
+    np.testing.assert_allclose(x0, expected, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(v0[1:], 0.0)
+
+
+def _distance_to_closed_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """Distance of each point (n, 3) to the closed polyline (R, 3)."""
+    a = polyline
+    b = np.roll(polyline, -1, axis=0)
+    ab = b - a
+    ap = points[:, None, :] - a[None]
+    s = np.clip(np.sum(ap * ab, axis=2) / np.sum(ab * ab, axis=1), 0.0, 1.0)
+    nearest = a[None] + s[..., None] * ab[None]
+    return np.min(np.linalg.norm(points[:, None, :] - nearest, axis=2), axis=1)
+
+
+@pytest.mark.parametrize("direction", ["radial", "[0.6, 0.8, 0.0]"])
+def test_rim_points_lie_on_the_margin(tmp_path: Path, direction: str) -> None:
+    key, value = jellysim.config.parse_override(f"root_motion.direction={direction}")
+    _run(tmp_path, {key: value, "tentacles.count": 5})
+    with jellysim.open_result(tmp_path) as r:
+        rim, margin = r.rim, r.margin
+    assert rim.shape[0] == margin.shape[0]
+    worst = max(
+        _distance_to_closed_polyline(rim[i], margin[i]).max() for i in range(rim.shape[0])
+    )
+    assert worst <= 1e-9, f"a rim point lies {worst:.3g} m off the margin"
+
+
+def _tentacle_data(folder: Path) -> dict[str, np.ndarray]:
+    with jellysim.open_result(folder) as r:
+        return _datasets(r.file)
+
+
+def test_same_seed_is_bitwise_reproducible(tmp_path: Path) -> None:
+    overrides = {"seed": 7, "flow.noise": 0.05}
+    _run(tmp_path / "a", overrides)
+    _run(tmp_path / "b", overrides)
+    a, b = _tentacle_data(tmp_path / "a"), _tentacle_data(tmp_path / "b")
+    assert a.keys() == b.keys()
+    for name in a:
+        assert np.array_equal(a[name], b[name]), f"{name} differs between identical runs"
+
+
+def test_seed_changes_the_noisy_flow_only(tmp_path: Path) -> None:
+    noisy = {"flow.noise": 0.05}
+    _run(tmp_path / "s1", {**noisy, "seed": 1})
+    _run(tmp_path / "s2", {**noisy, "seed": 2})
+    one = _tentacle_data(tmp_path / "s1")["tentacles/position"]
+    two = _tentacle_data(tmp_path / "s2")["tentacles/position"]
+    assert np.array_equal(one[0], two[0])  # the initial state does not depend on the seed
+    assert not np.array_equal(one, two)
+    assert np.abs(one - two).max() > 1e-6
+
+    # Without noise the seed draws nothing: the tentacles move identically.
+    _run(tmp_path / "q1", {"flow.noise": 0.0, "seed": 1})
+    _run(tmp_path / "q2", {"flow.noise": 0.0, "seed": 2})
+    quiet1 = _tentacle_data(tmp_path / "q1")["tentacles/position"]
+    quiet2 = _tentacle_data(tmp_path / "q2")["tentacles/position"]
+    assert np.array_equal(quiet1, quiet2)

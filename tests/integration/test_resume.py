@@ -1,0 +1,218 @@
+"""``jellysim run --resume`` after a real SIGKILL continues bitwise identically (DESIGN §3)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import jellysim
+
+DURATION = 6.0
+FPS = 30.0
+CHECKPOINT_EVERY = 7  # prime to the poll, so the kill usually lands between checkpoints
+# Small chains, many substeps: about 3 s of simulation, long enough to be killed mid-run.
+SLOW = [
+    f"duration={DURATION}",
+    f"fps={FPS}",
+    "tentacles.count=2",
+    "tentacles.particles=20",
+    f"solver.checkpoint_every={CHECKPOINT_EVERY}",
+    "solver.dt_safety=0.01",
+]
+FRAMES = round(DURATION * FPS) + 1
+
+
+def _sets(overrides: list[str]) -> list[str]:
+    return [arg for item in overrides for arg in ("--set", item)]
+
+
+def _command(out: Path, overrides: list[str], *extra: str) -> list[str]:
+    return [
+        sys.executable, "-m", "jellysim", "run", "brown-jelly",
+        "--out", str(out), "--quiet", *_sets(overrides), *extra,
+    ]  # fmt: skip
+
+
+def _jellysim(out: Path, overrides: list[str], *extra: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        _command(out, overrides, *extra), capture_output=True, text=True, timeout=300
+    )
+
+
+def _datasets(folder: Path) -> dict[str, np.ndarray]:
+    found: dict[str, np.ndarray] = {}
+    with jellysim.open_result(folder) as r:
+
+        def visit(name: str, obj: object) -> None:
+            if isinstance(obj, h5py.Dataset):
+                found[name] = obj[()]
+
+        r.file.visititems(visit)
+    return found
+
+
+def _attributes(folder: Path) -> dict[str, object]:
+    with jellysim.open_result(folder) as r:
+        return {k: r.file.attrs[k] for k in r.file.attrs}
+
+
+def _digest(path: Path) -> tuple[str, int]:
+    return hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime_ns
+
+
+def _fingerprint(folder: Path) -> dict[str, tuple[str, int]]:
+    return {p.name: _digest(p) for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+def _assert_invalid_input(done: subprocess.CompletedProcess[str]) -> None:
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    assert 1 <= len(done.stderr.strip().splitlines()) <= 3, done.stderr
+    assert done.stdout == ""
+
+
+def _assert_same_result(a: Path, b: Path) -> None:
+    left, right = _datasets(a), _datasets(b)
+    assert left.keys() == right.keys()
+    for name in left:
+        assert left[name].dtype == right[name].dtype, name
+        assert np.array_equal(left[name], right[name]), f"{name} differs from the reference run"
+    assert _attributes(a).keys() == _attributes(b).keys()
+    for key, value in _attributes(a).items():
+        assert np.array_equal(value, _attributes(b)[key]), f"attribute {key} differs"
+
+
+def _kill_mid_run(out: Path) -> int:
+    """Start the slow run, SIGKILL it once frames beyond a checkpoint are on disk.
+
+    Returns the frame count read from the live file just before the kill.
+    """
+    process = subprocess.Popen(
+        _command(out, SLOW), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    polled = 0
+    deadline = time.monotonic() + 180.0
+    try:
+        while time.monotonic() < deadline:
+            if process.poll() is not None:
+                _, err = process.communicate()
+                pytest.fail(f"the run ended (status {process.returncode}) before the kill: {err}")
+            if (out / "checkpoint.npz").exists():
+                try:
+                    with jellysim.open_result(out) as r:
+                        polled = r.frames
+                except (jellysim.InputError, OSError):
+                    polled = 0  # the writer is (re)creating the file
+                if polled >= 3 * CHECKPOINT_EVERY + 2:
+                    break
+            time.sleep(0.02)
+        else:
+            pytest.fail("no checkpoint and frames appeared within 180 s")
+        os.kill(process.pid, signal.SIGKILL)
+    finally:
+        if process.poll() is None:
+            process.kill()  # a failure above; after os.kill a second SIGKILL is harmless
+        process.communicate()
+    assert process.returncode == -signal.SIGKILL
+    return polled
+
+
+def test_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> None:
+    killed = tmp_path / "killed"
+    polled = _kill_mid_run(killed)
+
+    # The killed file opens (its SWMR writer never closed it) and holds every reported frame.
+    with jellysim.open_result(killed) as r:
+        frames = r.frames
+        assert polled <= frames < FRAMES
+        assert r.expected_frames == FRAMES
+        assert not r.complete
+        np.testing.assert_allclose(r.time, np.arange(frames) / FPS, rtol=1e-12)
+        for name in ("tentacles/position", "tentacles/velocity", "bell/rim", "bell/margin"):
+            data = r.file[name][()]
+            assert data.shape[0] == frames
+            assert np.all(np.isfinite(data)), f"{name} holds non-finite values"
+    with np.load(killed / "checkpoint.npz") as checkpoint:
+        checkpoint_frame = int(checkpoint["frame"])
+    assert checkpoint_frame % CHECKPOINT_EVERY == 0
+    assert CHECKPOINT_EVERY <= checkpoint_frame <= frames - 1
+
+    # Resuming with another scene is invalid input and touches nothing.
+    before = _fingerprint(killed)
+    _assert_invalid_input(_jellysim(killed, [*SLOW, "tentacles.youngs_modulus=200"], "--resume"))
+    assert _fingerprint(killed) == before
+
+    resumed = _jellysim(killed, SLOW, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert resumed.stdout == resumed.stderr == ""
+    assert not (killed / "checkpoint.npz").exists()
+    with jellysim.open_result(killed) as r:
+        assert r.frames == FRAMES and r.complete
+
+    reference = tmp_path / "reference"
+    done = _jellysim(reference, SLOW)
+    assert done.returncode == 0, done.stderr
+    _assert_same_result(killed, reference)
+    assert (killed / "scene.toml").read_text() == (reference / "scene.toml").read_text()
+
+
+def test_resume_of_a_finished_run_changes_nothing(tmp_path: Path) -> None:
+    quick = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
+    assert _jellysim(tmp_path, quick).returncode == 0
+    before = _fingerprint(tmp_path)
+    assert set(before) == {"result.h5", "scene.toml"}
+
+    done = _jellysim(tmp_path, quick, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert _fingerprint(tmp_path) == before
+
+    _assert_invalid_input(_jellysim(tmp_path, [*quick, "tentacles.youngs_modulus=200"], "--resume"))
+    assert _fingerprint(tmp_path) == before
+
+
+def test_resume_invalid_requests_exit_2(tmp_path: Path) -> None:
+    quick = ["duration=0.2", "tentacles.count=2", "tentacles.particles=20"]
+    _assert_invalid_input(_jellysim(tmp_path / "nothing", quick, "--resume"))
+    assert not (tmp_path / "nothing" / "result.h5").exists()
+    _assert_invalid_input(_jellysim(tmp_path / "both", quick, "--resume", "--force"))
+    assert not (tmp_path / "both" / "result.h5").exists()
+
+
+class _Interrupt(Exception):
+    pass
+
+
+def test_api_resume_after_an_aborted_run_is_bitwise_identical(tmp_path: Path) -> None:
+    """In-process: a run aborted by an exception mid-run resumes from its last checkpoint."""
+    overrides = {
+        "duration": 1.0,
+        "tentacles.count": 3,
+        "tentacles.particles": 20,
+        "solver.checkpoint_every": 4,
+    }
+    scene = jellysim.load_scene("brown-jelly", overrides)
+
+    def abort(simulation: jellysim.Simulation) -> None:
+        if simulation.frame == 14:
+            raise _Interrupt
+
+    with pytest.raises(_Interrupt):
+        jellysim.run(scene, tmp_path / "aborted", observers=[abort])
+    with jellysim.open_result(tmp_path / "aborted") as r:
+        assert r.frames == 14  # frames 0..13; frame 14 was aborted before it was written
+    with np.load(tmp_path / "aborted" / "checkpoint.npz") as checkpoint:
+        assert int(checkpoint["frame"]) == 12
+
+    with jellysim.run(scene, tmp_path / "aborted", resume=True) as r:
+        assert r.frames == scene.frame_count
+    jellysim.run(scene, tmp_path / "reference").close()
+    _assert_same_result(tmp_path / "aborted", tmp_path / "reference")
