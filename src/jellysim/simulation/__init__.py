@@ -68,14 +68,14 @@ class Simulation:
         return characteristic_speed(s) + math.sqrt(g * length * contrast) + 0.1
 
     def reset(self) -> None:
-        """Frame 0: every tentacle straight from its root along its clamp direction, at rest."""
+        """Frame 0: every tentacle straight from its root along its clamp direction, moving
+        rigidly with its root (no impulsive start)."""
         roots, root_velocities, directions = self.driver.roots(np.zeros(1))
         offsets = np.arange(self.scene.tentacles.particles) * self.scene.tentacles.spacing
         self.positions[:] = (
             roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
         )
-        self.velocities[:] = 0.0
-        self.velocities[:, 0] = root_velocities[0]
+        self.velocities[:] = root_velocities[0][:, None, :]
         self.frame = 0
 
     @property
