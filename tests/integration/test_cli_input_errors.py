@@ -201,11 +201,6 @@ def test_existing_result_is_not_overwritten(tmp_path: Path) -> None:
     assert result.stat().st_mtime_ns == mtime
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="cli/main.py _Parser.error prints argparse's usage of 'run', which wraps to 3 lines "
-    "at 80 columns, so a missing argument gives 4 lines of stderr",
-)
 def test_argparse_errors_fit_three_lines(tmp_path: Path) -> None:
     proc = jellysim(tmp_path, "run", "--out", "out")
     assert_rejected(proc.returncode, proc.stdout, proc.stderr, ("scene",), tmp_path / "out")

@@ -15,8 +15,8 @@ from jellysim.errors import InputError, JellysimError, SimulationUnstable
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
-        self.print_usage(sys.stderr)
-        self.exit(2, f"jellysim: error: {message}\n")
+        # One line (DESIGN §3: at most three), pointing at the help instead of the usage block.
+        self.exit(2, f"jellysim: error: {message} (see '{self.prog} --help')\n")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -1,0 +1,51 @@
+# jellysim: set-up and the main jobs. `make demo` runs the main job, `make test` the tests.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+OUT    ?= out
+
+.PHONY: demo test test-all lint docs clean venv
+
+# A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
+# lives in the python3-venv package: installed here when run as root, otherwise named.
+$(BIN)/jellysim: pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
+	  { echo "jellysim needs Python >= 3.11 (found $$($(PYTHON) --version))"; exit 1; }
+	@$(PYTHON) -m venv $(VENV) 2>/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    apt-get update -qq && apt-get install -y -qq python3-venv >/dev/null && $(PYTHON) -m venv $(VENV); \
+	  else \
+	    echo "cannot create a virtual environment: run 'sudo apt-get install python3-venv' and retry"; exit 1; \
+	  fi; }
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	@touch $@
+
+venv: $(BIN)/jellysim
+
+# The main job: simulate the brown-jelly preset and draw its figures.
+demo: $(BIN)/jellysim
+	$(BIN)/jellysim run brown-jelly --out $(OUT)/brown-jelly --force
+	$(BIN)/jellysim plot $(OUT)/brown-jelly
+	@echo
+	@echo "Result:  $(OUT)/brown-jelly/result.h5 (resolved scene: $(OUT)/brown-jelly/scene.toml)"
+	@echo "Figures: $(OUT)/brown-jelly/plots/"
+
+# The tests CI runs: everything but the tests marked slow that guard no physics claim.
+test: $(BIN)/jellysim
+	$(BIN)/python -m pytest -q
+
+# Every test, slow ones included.
+test-all: $(BIN)/jellysim
+	$(BIN)/python -m pytest -q --runslow
+
+lint: $(BIN)/jellysim
+	$(BIN)/ruff check src tests benchmarks
+
+# Regenerate the scene reference from the dataclasses.
+docs: $(BIN)/jellysim
+	$(BIN)/python -m jellysim.config.docs > docs/scene.md
+
+clean:
+	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache
+	find src tests -name __pycache__ -type d -prune -exec rm -rf {} +
