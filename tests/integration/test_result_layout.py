@@ -70,8 +70,14 @@ def test_per_frame_datasets_have_the_design_shapes(brown: tuple[jellysim.Scene, 
     assert frames == 21 == scene.frame_count
     with jellysim.open_result(folder) as r:
         f = r.file
-        for name in ("time", "tentacles/position", "tentacles/velocity", "bell/rim",
-                     "bell/rim_velocity", "bell/margin"):
+        for name in (
+            "time",
+            "tentacles/position",
+            "tentacles/velocity",
+            "bell/rim",
+            "bell/rim_velocity",
+            "bell/margin",
+        ):
             assert name in f, f"{name} missing from result.h5"
         assert f["time"].shape == (frames,)
         assert f["tentacles/position"].shape == (frames, t.count, t.particles, 3)
@@ -212,9 +218,7 @@ def test_rim_points_lie_on_the_margin(tmp_path: Path, direction: str) -> None:
     with jellysim.open_result(tmp_path) as r:
         rim, margin = r.rim, r.margin
     assert rim.shape[0] == margin.shape[0]
-    worst = max(
-        _distance_to_closed_polyline(rim[i], margin[i]).max() for i in range(rim.shape[0])
-    )
+    worst = max(_distance_to_closed_polyline(rim[i], margin[i]).max() for i in range(rim.shape[0]))
     assert worst <= 1e-9, f"a rim point lies {worst:.3g} m off the margin"
 
 

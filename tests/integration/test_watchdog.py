@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,10 @@ def _assert_clean_frames(folder: Path, clean: int) -> int:
     return frames
 
 
-def _corrupt_after(frame: int, corrupt):  # type: ignore[no-untyped-def]
+Corruption = Callable[[jellysim.Simulation], None]
+
+
+def _corrupt_after(frame: int, corrupt: Corruption) -> Corruption:
     """An observer that corrupts the state once frame ``frame`` has been computed and stored."""
 
     def observer(simulation: jellysim.Simulation) -> None:
@@ -56,7 +60,7 @@ def _nan_position(simulation: jellysim.Simulation) -> None:
 
 
 @pytest.mark.parametrize("corrupt", [_nan_velocity, _nan_position])
-def test_api_raises_simulation_unstable(tmp_path: Path, corrupt) -> None:  # type: ignore[no-untyped-def]
+def test_api_raises_simulation_unstable(tmp_path: Path, corrupt: Corruption) -> None:
     scene = _scene()
     with pytest.raises(jellysim.SimulationUnstable) as caught:
         jellysim.run(scene, tmp_path, observers=[_corrupt_after(CLEAN, corrupt)])
@@ -156,7 +160,9 @@ def _run_broken_cli(out: Path) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.fixture(scope="module")
-def broken_cli(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess[str]]:
+def broken_cli(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[Path, subprocess.CompletedProcess[str]]:
     out = tmp_path_factory.mktemp("unstable")
     return out, _run_broken_cli(out)
 
