@@ -101,11 +101,11 @@ def test_api_watchdog_catches_a_bad_kernel_step(
     err = caught.value
     assert err.tentacle == BROKEN
     assert err.time == pytest.approx((CLEAN + 1) / scene.fps, rel=1e-12)
-    assert "runaway" in str(err) and f"tentacle {BROKEN}" in str(err)
+    assert f"{err.time:.6g}" in str(err) and f"tentacle {BROKEN}" in str(err)
     assert _assert_clean_frames(tmp_path, CLEAN) == CLEAN + 1
 
 
-def test_api_observers_attribute(tmp_path: Path) -> None:
+def test_api_observers_attribute() -> None:
     """Observers added to Simulation.observers see every frame in order; the state steps on."""
     simulation = jellysim.Simulation(_scene())
     seen: list[int] = []

@@ -1,7 +1,7 @@
 """The result store: ``result.h5`` (layout in DESIGN §3), written frame by frame in HDF5 SWMR mode.
 
-Each frame is appended and flushed before it is reported as written, so a run killed at any
-moment (SIGKILL included) leaves a file holding every reported frame. A file whose writer was
+Frames are appended in batches, each flushed to disk before its frames count as written, so a
+run killed at any moment (SIGKILL included) leaves a file holding every reported frame. A file whose writer was
 killed still carries HDF5's "open for writing" flag: jellysim's own reader opens it (in SWMR read
 mode); other tools need ``h5clear -s result.h5`` (Debian package hdf5-tools) first, or a
 ``jellysim run --resume``, which rewrites it cleanly.
@@ -10,6 +10,7 @@ mode); other tools need ``h5clear -s result.h5`` (Debian package hdf5-tools) fir
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -47,7 +48,12 @@ def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[D
 
 
 class ResultWriter:
-    """Appends frames to ``result.h5`` in SWMR mode; every append is flushed to disk."""
+    """Appends frames to ``result.h5`` in SWMR mode.
+
+    Frames are buffered and written in batches (every ``batch_frames`` frames or
+    ``batch_seconds`` of wall time, and on :meth:`flush`); ``frames`` counts those flushed to
+    disk, which are the ones reported as written.
+    """
 
     def __init__(
         self,
@@ -55,6 +61,8 @@ class ResultWriter:
         datasets: list[Dataset],
         attributes: dict[str, Any],
         initial: dict[str, np.ndarray] | None = None,
+        batch_frames: int = 32,
+        batch_seconds: float = 1.0,
     ) -> None:
         """Create the file (replacing one there), optionally starting with ``initial`` frames."""
         self.path = path
@@ -80,21 +88,42 @@ class ResultWriter:
         self._file = h5py.File(path, "r+", libver="latest")
         self._file.swmr_mode = True
         self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
+        self._buffer: dict[str, list[Any]] = {name: [] for name in self._datasets}
+        self._batch_frames = batch_frames
+        self._batch_seconds = batch_seconds
+        self._last_flush = time.monotonic()
         self.frames = 0 if initial is None else int(initial["time"].shape[0])
 
     def append(self, values: dict[str, np.ndarray | float]) -> None:
-        """Append one frame (every dataset) and flush it to disk."""
-        index = self.frames
-        for name, ds in self._datasets.items():
-            ds.resize(index + 1, axis=0)
-            ds[index] = values[name]
-        for ds in self._datasets.values():
-            ds.flush()
-        self._file.flush()
-        self.frames = index + 1
+        """Add one frame (every dataset); it reaches the disk with the next flush."""
+        for name, buffer in self._buffer.items():
+            buffer.append(np.array(values[name], copy=True))
+        pending = len(self._buffer["time"])
+        if (
+            pending >= self._batch_frames
+            or time.monotonic() - self._last_flush >= self._batch_seconds
+        ):
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered frames and flush them to disk."""
+        pending = len(self._buffer["time"])
+        if pending:
+            start = self.frames
+            for name, ds in self._datasets.items():
+                ds.resize(start + pending, axis=0)
+                ds[start:] = np.stack(self._buffer[name])
+                self._buffer[name].clear()
+            for ds in self._datasets.values():
+                ds.flush()
+            self._file.flush()
+            self.frames = start + pending
+        self._last_flush = time.monotonic()
 
     def close(self) -> None:
+        """Flush what is buffered and close the file."""
         if self._file.id.valid:
+            self.flush()
             self._file.close()
 
 

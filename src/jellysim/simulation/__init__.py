@@ -254,6 +254,7 @@ def run(
                 simulation.step_frame()
                 writer.append(simulation.frame_values())
                 if simulation.frame % every == 0:
+                    writer.flush()  # the checkpoint's frame must be on disk first
                     save_checkpoint(
                         folder,
                         simulation.frame,
