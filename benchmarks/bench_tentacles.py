@@ -29,8 +29,10 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0)
     args = parser.parse_args()
     numba.set_num_threads(args.threads)
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
-          f"numba {numba.__version__}, threads {numba.get_num_threads()}")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+        f"numba {numba.__version__}, threads {numba.get_num_threads()}"
+    )
 
     start = time.perf_counter()
     warm = Simulation(jellysim.load_scene("brown-jelly", {"duration": 0.1}))

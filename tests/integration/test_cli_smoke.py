@@ -18,12 +18,12 @@ import pytest
 import jellysim
 
 QUICK = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
-# About 200 frames of 400 substeps: a few seconds, past the progress bar's 2 s delay.
+# About 240 frames of 1100 substeps: some 5 s, well past the progress bar's 2 s delay.
 LONG = [
-    "duration=6.5",
+    "duration=8",
     "tentacles.count=2",
     "tentacles.particles=20",
-    "solver.dt_safety=0.01",
+    "solver.dt_safety=0.003",
 ]
 
 

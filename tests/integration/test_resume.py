@@ -16,10 +16,12 @@ import pytest
 
 import jellysim
 
-DURATION = 6.0
+DURATION = 10.0
 FPS = 30.0
-CHECKPOINT_EVERY = 7  # prime to the poll, so the kill usually lands between checkpoints
-# Small chains, many substeps: about 3 s of simulation, long enough to be killed mid-run.
+# Checkpoints rarer than the result store's batches, so the file often holds frames past the
+# last checkpoint (those a resume must recompute).
+CHECKPOINT_EVERY = 50
+# Small chains, many substeps: a few seconds of simulation, long enough to be killed mid-run.
 SLOW = [
     f"duration={DURATION}",
     f"fps={FPS}",
@@ -91,44 +93,56 @@ def _assert_same_result(a: Path, b: Path) -> None:
         assert np.array_equal(value, _attributes(b)[key]), f"attribute {key} differs"
 
 
-def _kill_mid_run(out: Path) -> int:
-    """Start the slow run, SIGKILL it once frames beyond a checkpoint are on disk.
+def _checkpoint_frame(folder: Path) -> int | None:
+    try:
+        with np.load(folder / "checkpoint.npz") as checkpoint:
+            return int(checkpoint["frame"])
+    except (OSError, ValueError, KeyError, EOFError):
+        return None  # none yet
 
-    Returns the frame count read from the live file just before the kill.
+
+def _written_frames(folder: Path) -> int:
+    try:
+        with jellysim.open_result(folder) as r:
+            return r.frames
+    except (jellysim.InputError, OSError):
+        return 0  # the writer is (re)creating the file
+
+
+def _kill_mid_run(out: Path) -> tuple[int, int]:
+    """Start the slow run and SIGKILL it once result.h5 holds frames past a checkpoint.
+
+    Returns the frame count and the checkpoint frame read just before the kill.
     """
     process = subprocess.Popen(
         _command(out, SLOW), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
-    polled = 0
     deadline = time.monotonic() + 180.0
     try:
-        while time.monotonic() < deadline:
+        while True:
             if process.poll() is not None:
                 _, err = process.communicate()
                 pytest.fail(f"the run ended (status {process.returncode}) before the kill: {err}")
-            if (out / "checkpoint.npz").exists():
-                try:
-                    with jellysim.open_result(out) as r:
-                        polled = r.frames
-                except (jellysim.InputError, OSError):
-                    polled = 0  # the writer is (re)creating the file
-                if polled >= 3 * CHECKPOINT_EVERY + 2:
+            if time.monotonic() > deadline:
+                pytest.fail("result.h5 held no frames past a checkpoint within 180 s")
+            checkpoint = _checkpoint_frame(out)
+            if checkpoint is not None:
+                frames = _written_frames(out)
+                if frames > checkpoint + 1:
                     break
-            time.sleep(0.02)
-        else:
-            pytest.fail("no checkpoint and frames appeared within 180 s")
+            time.sleep(0.01)
         os.kill(process.pid, signal.SIGKILL)
     finally:
         if process.poll() is None:
             process.kill()  # a failure above; after os.kill a second SIGKILL is harmless
         process.communicate()
     assert process.returncode == -signal.SIGKILL
-    return polled
+    return frames, checkpoint
 
 
 def test_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> None:
     killed = tmp_path / "killed"
-    polled = _kill_mid_run(killed)
+    polled, polled_checkpoint = _kill_mid_run(killed)
 
     # The killed file opens (its SWMR writer never closed it) and holds every reported frame.
     with jellysim.open_result(killed) as r:
@@ -141,10 +155,10 @@ def test_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> None:
             data = r.file[name][()]
             assert data.shape[0] == frames
             assert np.all(np.isfinite(data)), f"{name} holds non-finite values"
-    with np.load(killed / "checkpoint.npz") as checkpoint:
-        checkpoint_frame = int(checkpoint["frame"])
+    checkpoint_frame = _checkpoint_frame(killed)
+    assert checkpoint_frame is not None
     assert checkpoint_frame % CHECKPOINT_EVERY == 0
-    assert CHECKPOINT_EVERY <= checkpoint_frame <= frames - 1
+    assert polled_checkpoint <= checkpoint_frame <= frames - 1
 
     # Resuming with another scene is invalid input and touches nothing.
     before = _fingerprint(killed)

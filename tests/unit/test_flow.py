@@ -43,6 +43,7 @@ def test_noise_is_smooth_and_has_the_requested_amplitude():
     noise = FlowNoise(sigma, tau, 2000.0, 1, seed=3)
     times = np.linspace(0, 2000, 400_001)
     u = noise.sample(times)[:, 0]
+
     # C1: the slope's change between samples shrinks with the sample spacing (a kink at a knot
     # would keep it finite).
     def largest_slope_change(spacing):

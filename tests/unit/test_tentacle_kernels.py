@@ -43,7 +43,7 @@ def test_bending_force_is_minus_gradient_of_energy(clamped):
             plus, minus = x.copy(), x.copy()
             plus[i, k] += h
             minus[i, k] -= h
-            grad = (bending_energy(plus, c, clamped, DOWN) - bending_energy(minus, c, clamped, DOWN))
+            grad = bending_energy(plus, c, clamped, DOWN) - bending_energy(minus, c, clamped, DOWN)
             assert forces[i, k] == pytest.approx(-grad / (2 * h), abs=1e-8)
 
 
@@ -88,9 +88,13 @@ def test_bending_coefficients_as_data():
     assert second_moment(d) == pytest.approx(math.pi * d**4 / 64, rel=1e-15)
     assert SPAN_CUBED == {"euler-bernoulli": 12.0, "ewing": 8.0}
     ei = e_modulus * second_moment(d)
-    assert effective_bending_rigidity(e_modulus, d, "euler-bernoulli") == pytest.approx(ei, rel=1e-14)
+    assert effective_bending_rigidity(e_modulus, d, "euler-bernoulli") == pytest.approx(
+        ei, rel=1e-14
+    )
     assert effective_bending_rigidity(e_modulus, d, "ewing") == pytest.approx(1.5 * ei, rel=1e-14)
-    assert bending_stiffness(e_modulus, d, "ewing") == pytest.approx(48 * ei / (2 * d) ** 3, rel=1e-14)
+    assert bending_stiffness(e_modulus, d, "ewing") == pytest.approx(
+        48 * ei / (2 * d) ** 3, rel=1e-14
+    )
 
 
 def test_lumped_masses():

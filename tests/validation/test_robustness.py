@@ -25,15 +25,17 @@ def run_frames(overrides):
 
 
 def test_segment_lengths_hold_through_a_violent_run():
-    scene, simulation, frames, worst = run_frames({
-        "tentacles.youngs_modulus": 1e3,
-        "flow.speed": 1.0,
-        "flow.noise": 0.3,
-        "flow.noise_correlation_time": 0.05,
-        "root_motion.amplitude": 0.2,
-        "root_motion.frequency": 3.0,
-        "root_motion.direction": [1.0, 0.3, 0.5],
-    })
+    scene, simulation, frames, worst = run_frames(
+        {
+            "tentacles.youngs_modulus": 1e3,
+            "flow.speed": 1.0,
+            "flow.noise": 0.3,
+            "flow.noise_correlation_time": 0.05,
+            "root_motion.amplitude": 0.2,
+            "root_motion.frequency": 3.0,
+            "root_motion.direction": [1.0, 0.3, 0.5],
+        }
+    )
     assert worst <= 1e-6
     lengths = np.linalg.norm(np.diff(frames, axis=2), axis=3)
     np.testing.assert_allclose(lengths, scene.tentacles.spacing, rtol=1e-6)

@@ -55,6 +55,7 @@ def test_terminal_velocity_in_the_stokes_range():
 @pytest.mark.parametrize("dt", [1e-3, 4e-3])
 def test_fall_speed_grows_monotonically_to_terminal(dt):
     particles, d = 10, 0.01
-    model_speeds = [-fall(particles, d, 1100.0, 1000.0, 1e-3, t, dt)[:, 2].mean()
-                    for t in (0.1, 0.4, 1.6)]
+    model_speeds = [
+        -fall(particles, d, 1100.0, 1000.0, 1e-3, t, dt)[:, 2].mean() for t in (0.1, 0.4, 1.6)
+    ]
     assert model_speeds[0] < model_speeds[1] < model_speeds[2]

@@ -35,7 +35,8 @@ def load_checkpoint(folder: Path, scene_toml: str) -> tuple[int, dict[str, np.nd
     path = folder / CHECKPOINT_FILE
     if not path.is_file():
         raise InputError(
-            f"nothing to resume in '{folder}': no {CHECKPOINT_FILE} (run without --resume)"
+            f"cannot resume '{folder}': the run stopped before its first checkpoint "
+            "(start it again with --force)"
         )
     try:
         with np.load(path) as data:

@@ -83,10 +83,9 @@ class ResultWriter:
             ds.attrs["units"] = spec.units
         for key, value in attributes.items():
             f.attrs[key] = value
-        f.close()
-        os.replace(temporary, path)
-        self._file = h5py.File(path, "r+", libver="latest")
-        self._file.swmr_mode = True
+        f.swmr_mode = True
+        os.replace(temporary, path)  # only now visible, already in SWMR mode (open files move)
+        self._file = f
         self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
         self._buffer: dict[str, list[Any]] = {name: [] for name in self._datasets}
         self._batch_frames = batch_frames

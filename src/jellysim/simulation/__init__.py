@@ -110,9 +110,9 @@ class Simulation:
             self.diagnostics,
         )
         self.frame += 1
-        self._watchdog(times)
         for observer in self.observers:
             observer(self)
+        self._watchdog(times)
 
     def _watchdog(self, times: np.ndarray) -> None:
         failed = self.diagnostics[:, 2]
@@ -127,8 +127,9 @@ class Simulation:
                 tentacle=chain,
             )
         rms = np.sqrt(np.mean(np.sum(self.velocities**2, axis=2), axis=1))
-        if not np.all(np.isfinite(rms)) or np.any(rms > self.speed_limit):
-            bad = ~np.isfinite(rms) | (rms > self.speed_limit)
+        finite = np.isfinite(rms) & np.all(np.isfinite(self.positions), axis=(1, 2))
+        if not np.all(finite) or np.any(rms > self.speed_limit):
+            bad = ~finite | (rms > self.speed_limit)
             chain = int(np.argmax(bad))
             raise SimulationUnstable(
                 f"runaway energy at t = {self.time:.6g} s in tentacle {chain}: RMS speed "
@@ -217,9 +218,16 @@ def run(
     datasets = simulation.datasets()
     if resume:
         with Result(folder) as existing:
-            if existing.complete and existing.scene_text == scene_toml:
-                log.info("%s is complete; nothing to resume", result_path)
-                return Result(folder)
+            same_scene = existing.scene_text == scene_toml
+            complete = existing.complete
+        if not same_scene:
+            raise InputError(
+                f"cannot resume '{folder}': the scene differs from the run being resumed "
+                "(compare with its scene.toml, or run with --force to start again)"
+            )
+        if complete:
+            log.info("%s is complete; nothing to resume", result_path)
+            return Result(folder)
         frame, state = load_checkpoint(folder, scene_toml)
         simulation.positions[:] = state["positions"]
         simulation.velocities[:] = state["velocities"]

@@ -142,7 +142,7 @@ KKT_BLOCK = 4  # unknowns per particle in the saddle-point system: x, y, z and o
 KKT_HALF_BANDWIDTH = 10  # x_i couples to x_{i+2}: 2 blocks + 2 components
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, error_model="numpy")
 def _band_ldlt_solve(band: np.ndarray, pivots: np.ndarray, rhs: np.ndarray) -> None:
     """Solve a symmetric banded system in place by LDL^T without pivoting.
 
@@ -178,7 +178,7 @@ def _band_ldlt_solve(band: np.ndarray, pivots: np.ndarray, rhs: np.ndarray) -> N
         rhs[i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def project_lengths(
     x: np.ndarray,
     inverse_mass: np.ndarray,
@@ -255,7 +255,7 @@ PROJECTION_TOLERANCE = 1.0e-10  # relative segment-length error after every step
 PROJECTION_MAX_ITERATIONS = 50
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def advance_frame(
     positions: np.ndarray,
     velocities: np.ndarray,
