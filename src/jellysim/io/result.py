@@ -2,9 +2,9 @@
 
 Frames are appended in batches, each flushed to disk before its frames count as written, so a
 run killed at any moment (SIGKILL included) leaves a file holding every reported frame. A file
-whose writer was killed still carries HDF5's "open for writing" flag: jellysim's own reader opens it (in SWMR read
-mode); other tools need ``h5clear -s result.h5`` (Debian package hdf5-tools) first, or a
-``jellysim run --resume``, which rewrites it cleanly.
+whose writer was killed still carries HDF5's "open for writing" flag: jellysim's own reader
+opens it (in SWMR read mode); other tools need ``h5clear -s result.h5`` (Debian package
+hdf5-tools) first, or a ``jellysim run --resume``, which rewrites it cleanly.
 """
 
 from __future__ import annotations
