@@ -57,3 +57,21 @@ def test_discretisation_error_falls_with_resolution():
         tip, theory = static_tip_deflection("euler-bernoulli", particles, spacing, modulus=5e9)
         errors.append(abs(tip / theory - 1))
     assert errors[0] > errors[1] > errors[2]
+
+
+def test_pinned_root_carries_no_moment():
+    # A pinned root is a free hinge: under a sideways load the chain swings until it lies along
+    # the load, straight (no bending at equilibrium), however stiff it is.
+    particles, spacing = 30, 0.01
+    model = build_chain_model(particles, spacing, 5e9, 2000.0, "euler-bernoulli", "pinned")
+    # Syrup (1 Pa s) damps the pendulum so that it settles.
+    medium = Medium(1000.0, 1.0, np.array([9.81, 0.0, 0.0]), 2000.0)
+    x = (np.arange(particles)[:, None] * spacing * DOWN)[None].copy()
+    v = np.zeros_like(x)
+    zeros = np.zeros((1200, 1, 3))
+    diagnostics = np.zeros((1, 3))
+    advance_frame(x, v, zeros, zeros, zeros + DOWN, zeros, model, medium, 0.05, diagnostics)
+    assert diagnostics[0, 2] == -1
+    expected = np.arange(particles) * spacing
+    np.testing.assert_allclose(x[0, :, 0], expected, atol=1e-6)
+    np.testing.assert_allclose(x[0, :, 1:], 0.0, atol=1e-6)

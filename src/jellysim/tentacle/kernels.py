@@ -9,7 +9,8 @@ prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T
    linearised at the start of the step: the saddle-point (KKT) system
    ``[A  J^T; J  0] [x; lambda] = [M (x + dt v) + dt K_d x + dt^2 (f + K_d u); d]`` with
    ``A = M + dt K_d + dt^2 c K``, interleaved per particle into a band of half-width 10 and
-   solved by a banded LDL^T factorisation in O(P) (Eq. T7),
+   solved by a banded LDL^T factorisation in O(P) (Eq. T7); re-linearised at the new iterate
+   while a length is off by more than 1e-3,
 3. exact projection onto ``|x_{i+1} - x_i| = d`` by Newton iterations of the fast projection
    on a tridiagonal system, O(P) each; it only removes the linearisation's second-order error
    (Eq. T8),
@@ -251,6 +252,8 @@ def project_lengths(
     return -1
 
 
+MAX_LINEARISATIONS = 8
+RELINEARISE_ABOVE = 1.0e-3  # relative length error after a solve that asks for another
 PROJECTION_TOLERANCE = 1.0e-10  # relative segment-length error after every step
 PROJECTION_MAX_ITERATIONS = 50
 
@@ -304,72 +307,83 @@ def advance_frame(
             r = root_positions[s, t]
             tdir = root_directions[s, t]
             old[:] = x
-            band[:] = 0.0
-            # Assemble the saddle-point system, Eq. (T7); particle i is block q = i - first.
-            for q in range(n_free):
-                i = q + first
-                row = KKT_BLOCK * q
-                rel0 = u[0] - v[i, 0]
-                rel1 = u[1] - v[i, 1]
-                rel2 = u[2] - v[i, 2]
-                k_drag = drag_gain(
-                    math.sqrt(rel0 * rel0 + rel1 * rel1 + rel2 * rel2),
-                    d,
-                    medium.density,
-                    medium.viscosity,
-                )
-                m = model.mass[i]
-                buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
-                diagonal = m + dt * k_drag + dt2c * model.stiffness_diag[q]
-                for k in range(3):
-                    band[row + k, 0] = diagonal
-                    if q >= 1:
-                        band[row + k, KKT_BLOCK] = dt2c * model.stiffness_off1[q - 1]
-                    if q >= 2:
-                        band[row + k, 2 * KKT_BLOCK] = dt2c * model.stiffness_off2[q - 2]
-                    rhs[row + k] = (
-                        m * (x[i, k] + dt * v[i, k])
-                        + dt * k_drag * x[i, k]
-                        + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
+            # Sequential linearisation: re-solve with the segment directions of the new iterate
+            # while a segment rotates so far in one step that its length is off by > 1e-3.
+            for _linearisation in range(MAX_LINEARISATIONS):
+                band[:] = 0.0
+                # Assemble the saddle-point system, Eq. (T7); particle i is block q = i - first.
+                for q in range(n_free):
+                    i = q + first
+                    row = KKT_BLOCK * q
+                    rel0 = u[0] - v[i, 0]
+                    rel1 = u[1] - v[i, 1]
+                    rel2 = u[2] - v[i, 2]
+                    k_drag = drag_gain(
+                        math.sqrt(rel0 * rel0 + rel1 * rel1 + rel2 * rel2),
+                        d,
+                        medium.density,
+                        medium.viscosity,
                     )
-                # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its direction.
-                lam = row + 3
-                if i == 0:  # a free root has no segment before it: a decoupled dummy
-                    band[lam, 0] = -1.0
-                    rhs[lam] = 0.0
-                    continue
-                e0 = x[i, 0] - x[i - 1, 0]
-                e1 = x[i, 1] - x[i - 1, 1]
-                e2 = x[i, 2] - x[i - 1, 2]
-                inv = 1.0 / math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-                normal = (e0 * inv, e1 * inv, e2 * inv)
-                rhs[lam] = d
-                for k in range(3):
-                    band[lam, 3 - k] = normal[k]
-                    if i - 1 >= first:
-                        band[lam, 7 - k] = -normal[k]
-                if i - 1 < first:  # the segment from the prescribed root
-                    rhs[lam] += normal[0] * r[0] + normal[1] * r[1] + normal[2] * r[2]
-            if first == 1:
-                # The prescribed root enters through the bending coupling, Eq. (T7).
-                for k in range(3):
-                    rhs[k] -= dt2c * model.root_coupling[0] * r[k]
-                    if n_free > 1:
-                        rhs[KKT_BLOCK + k] -= dt2c * model.root_coupling[1] * r[k]
-                if model.clamped:
-                    # The clamp's part along t: -(c/2) t t^T on particle 1, Eq. (T3).
-                    along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
+                    m = model.mass[i]
+                    buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
+                    diagonal = m + dt * k_drag + dt2c * model.stiffness_diag[q]
                     for k in range(3):
-                        rhs[k] -= 0.5 * dt2c * along * tdir[k]
-                        for kk in range(k + 1):
-                            band[k, k - kk] -= 0.5 * dt2c * tdir[k] * tdir[kk]
-            _band_ldlt_solve(band, pivots, rhs)
-            if first == 1:
-                for k in range(3):
-                    x[0, k] = r[k]
-            for q in range(n_free):
-                for k in range(3):
-                    x[q + first, k] = rhs[KKT_BLOCK * q + k]
+                        band[row + k, 0] = diagonal
+                        if q >= 1:
+                            band[row + k, KKT_BLOCK] = dt2c * model.stiffness_off1[q - 1]
+                        if q >= 2:
+                            band[row + k, 2 * KKT_BLOCK] = dt2c * model.stiffness_off2[q - 2]
+                        rhs[row + k] = (
+                            m * (old[i, k] + dt * v[i, k])
+                            + dt * k_drag * old[i, k]
+                            + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
+                        )
+                    # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its direction.
+                    lam = row + 3
+                    if i == 0:  # a free root has no segment before it: a decoupled dummy
+                        band[lam, 0] = -1.0
+                        rhs[lam] = 0.0
+                        continue
+                    e0 = x[i, 0] - x[i - 1, 0]
+                    e1 = x[i, 1] - x[i - 1, 1]
+                    e2 = x[i, 2] - x[i - 1, 2]
+                    inv = 1.0 / math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                    normal = (e0 * inv, e1 * inv, e2 * inv)
+                    rhs[lam] = d
+                    for k in range(3):
+                        band[lam, 3 - k] = normal[k]
+                        if i - 1 >= first:
+                            band[lam, 7 - k] = -normal[k]
+                    if i - 1 < first:  # the segment from the prescribed root
+                        rhs[lam] += normal[0] * r[0] + normal[1] * r[1] + normal[2] * r[2]
+                if first == 1:
+                    # The prescribed root enters through the bending coupling, Eq. (T7).
+                    for k in range(3):
+                        rhs[k] -= dt2c * model.root_coupling[0] * r[k]
+                        if n_free > 1:
+                            rhs[KKT_BLOCK + k] -= dt2c * model.root_coupling[1] * r[k]
+                    if model.clamped:
+                        # The clamp's part along t: -(c/2) t t^T on particle 1, Eq. (T3).
+                        along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
+                        for k in range(3):
+                            rhs[k] -= 0.5 * dt2c * along * tdir[k]
+                            for kk in range(k + 1):
+                                band[k, k - kk] -= 0.5 * dt2c * tdir[k] * tdir[kk]
+                _band_ldlt_solve(band, pivots, rhs)
+                if first == 1:
+                    for k in range(3):
+                        x[0, k] = r[k]
+                for q in range(n_free):
+                    for k in range(3):
+                        x[q + first, k] = rhs[KKT_BLOCK * q + k]
+                worst = 0.0
+                for j in range(n_segments):
+                    e0 = x[j + 1, 0] - x[j, 0]
+                    e1 = x[j + 1, 1] - x[j, 1]
+                    e2 = x[j + 1, 2] - x[j, 2]
+                    worst = max(worst, abs(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / d - 1.0))
+                if worst < RELINEARISE_ABOVE:
+                    break
             # Exact inextensibility, Eq. (T8).
             iterations = project_lengths(
                 x,
