@@ -11,6 +11,7 @@ import logging
 import math
 import os
 import sys
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -86,6 +87,24 @@ class Simulation:
         """End times (s) of the substeps that lead from ``frame`` to ``frame + 1``."""
         n = self.plan.substeps
         return (frame * n + np.arange(1, n + 1)) * (self.frame_dt / n)
+
+    def prepare(self) -> None:
+        """Compile the kernels (or load them from Numba's cache) on a throw-away copy of the
+        state, so that the first frame's timing, and the progress bar's ETA, are honest."""
+        times = self.substep_times(self.frame)[:1]
+        roots, root_velocities, directions = self.driver.roots(times)
+        advance_frame(
+            self.positions.copy(),
+            self.velocities.copy(),
+            roots,
+            root_velocities,
+            directions,
+            np.zeros_like(roots),
+            self.model,
+            self.medium,
+            self.plan.dt,
+            self.diagnostics.copy(),
+        )
 
     def step_frame(self) -> None:
         """Advance the state by one frame; raise SimulationUnstable if it diverged."""
@@ -257,6 +276,9 @@ def run(
     )
     every = scene.solver.checkpoint_every
     try:
+        start = time.perf_counter()
+        simulation.prepare()
+        log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
         with _progress(scene.frame_count - 1, simulation.frame, quiet) as bar:
             while simulation.frame < scene.frame_count - 1:
                 simulation.step_frame()
