@@ -164,9 +164,56 @@ def test_out_of_range_number(
     status = main(["run", PRESET, "--set", f"{key}={value}", "--out", "out"])
     captured = capsys.readouterr()
     assert_rejected(
-        status, captured.out, captured.err, (f"{key} = {value}", "> 0"), tmp_path / "out"
+        status, captured.out, captured.err, (f"{key} = {value}", "expected"), tmp_path / "out"
     )
     assert list(tmp_path.iterdir()) == []
+
+
+EXTREME_CASES = {
+    "tiny-spacing": ("tentacles.spacing=1e-300", "tentacles.spacing"),
+    "dense-water": ("water.density=1e300", "water.density"),
+    "thin-water": ("water.density=1e-300", "water.density"),
+    "syrup": ("water.viscosity=1e300", "water.viscosity"),
+    "no-viscosity": ("water.viscosity=1e-300", "water.viscosity"),
+    "supersonic-flow": ("flow.speed=1e300", "flow.speed"),
+    "tiny-safety": ("solver.dt_safety=1e-300", "solver.dt_safety"),
+    "huge-fps": ("fps=1e300", "fps"),
+    "huge-bell": ("bell.radius=1e300", "bell.radius"),
+    "white-noise": ("flow.noise_correlation_time=1e-300", "flow.noise_correlation_time"),
+    "buzzing-root": ("root_motion.frequency=1e9", "root_motion.frequency"),
+    "dots-name": ('name=".."', "name"),
+}
+
+
+@pytest.mark.parametrize(("item", "key"), EXTREME_CASES.values(), ids=EXTREME_CASES)
+def test_extreme_finite_values_are_input_errors(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    item: str,
+    key: str,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    status = main(["run", PRESET, "--set", item, "--out", "out"])
+    captured = capsys.readouterr()
+    assert_rejected(status, captured.out, captured.err, (key,), tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scene_that_needs_too_many_substeps_is_refused_before_writing(tmp_path: Path) -> None:
+    args = (
+        "run",
+        PRESET,
+        "--set",
+        "tentacles.youngs_modulus=1e13",
+        "--set",
+        "fps=0.01",
+        "--set",
+        "tentacles.particles=3",
+        "--set",
+        "duration=100",
+    )
+    check_subprocess(tmp_path, args, ("substeps per frame", "solver.dt_safety"))
 
 
 @pytest.mark.parametrize("key", BOUNDED_KEYS)

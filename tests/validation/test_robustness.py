@@ -53,7 +53,7 @@ def test_stable_across_the_papers_range_of_youngs_modulus(modulus):
     root_x = frames[:, 0, 0, 0]
     tip_x = frames[:, 0, -1, 0]
     assert np.ptp(tip_x) <= 2.0 * np.ptp(root_x) + 0.05
-    if modulus >= 1e9:  # wood: its first mode (~370 Hz) is far above the 1 Hz forcing
+    if modulus >= 1e9:  # wood: its first mode (~12 Hz) is well above the 1 Hz forcing
         np.testing.assert_allclose(tip_x, root_x, atol=0.02 * np.ptp(root_x))
 
 
@@ -65,3 +65,22 @@ def test_stiffer_rods_move_the_tip_more():
         _, _, frames, _ = run_frames({"tentacles.youngs_modulus": modulus, "flow.noise": 0.0})
         ranges.append(np.ptp(frames[len(frames) // 2 :, 0, -1, 0]))
     assert ranges[0] < ranges[1] < ranges[2]
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"flow.speed": 5.0},
+        {"flow.speed": 10.0, "flow.noise": 1.0},
+        {"tentacles.particles": 400, "flow.speed": 1.0},
+        {"tentacles.spacing": 0.002, "tentacles.particles": 200},
+        {"tentacles.density": 1500.0, "root_motion.amplitude": 0.3, "root_motion.frequency": 4.0},
+    ],
+    ids=["fast-flow", "faster-noisy", "long", "thin", "heavy-shaken"],
+)
+def test_the_chosen_substep_copes_with_hard_scenes(overrides):
+    # The user never sets dt (DESIGN §2): fast flows, long and thin chains must run as they are.
+    scene, simulation, frames, worst = run_frames({**overrides, "duration": 0.5})
+    assert np.all(np.isfinite(frames))
+    assert worst <= 1e-6
+    assert simulation.diagnostics[:, 1].max() <= 10  # the projection is only a clean-up

@@ -18,8 +18,6 @@ from jellysim.config.schema import Scene
 class RootDriver(Protocol):
     """Prescribes the tentacle roots. Times are (S,) arrays in s."""
 
-    count: int
-
     def roots(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Root positions (m), velocities (m/s) and unit clamp directions, each (S, T, 3)."""
         ...

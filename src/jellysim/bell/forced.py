@@ -27,7 +27,6 @@ class ForcedRoots:
         frequency: float,
         direction: str | tuple[float, float, float],
     ) -> None:
-        self.count = count
         self.radius = radius
         self.amplitude = amplitude
         self.omega = 2.0 * np.pi * frequency
@@ -58,7 +57,7 @@ class ForcedRoots:
 
     def margin(self, time: float) -> np.ndarray:
         """The circle with every point moved by the same law, so the roots lie on it."""
-        n = MARGIN_POINTS_PER_ROOT * self.count
+        n = MARGIN_POINTS_PER_ROOT * self.base.shape[0]
         angles = 2.0 * np.pi * np.arange(n) / n
         circle = self.radius * np.stack([np.cos(angles), np.sin(angles), np.zeros(n)], axis=1)
         return circle + self.amplitude * np.sin(self.omega * time) * self._directions(angles)

@@ -58,10 +58,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene, args.overrides)
     if not args.quiet:
         logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
-    try:
-        result = run(scene, args.out, force=args.force, resume=args.resume, quiet=args.quiet)
-    except SimulationUnstable:
-        raise
+    result = run(scene, args.out, force=args.force, resume=args.resume, quiet=args.quiet)
     with result:
         if not args.quiet:
             print(f"wrote {result.path} ({result.frames} frames)")
@@ -94,12 +91,12 @@ def _cmd_presets(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
-    from jellysim.config.load import _suggest
+    from jellysim.config.load import suggest
     from jellysim.species import preset_names, preset_text
 
     if args.name not in preset_names():
         raise InputError(
-            f"unknown preset '{args.name}'{_suggest(args.name, preset_names())}; "
+            f"unknown preset '{args.name}'{suggest(args.name, preset_names())}; "
             f"presets: {', '.join(preset_names())}"
         )
     sys.stdout.write(preset_text(args.name))
@@ -122,7 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return err.exit_status
     except KeyboardInterrupt:
         print("jellysim: interrupted", file=sys.stderr)
-        return 130
+        return 1
     except Exception as err:  # one line, no traceback, unless asked for
         if os.environ.get("JELLYSIM_DEBUG"):
             raise

@@ -12,7 +12,7 @@ from typing import Any
 
 import tomli_w
 
-from jellysim.config.load import _allowed
+from jellysim.config.load import allowed
 from jellysim.config.schema import SECTIONS, Scene
 
 PREAMBLE = """\
@@ -72,7 +72,7 @@ def _table(title: str, cls: type, prefix: str) -> list[str]:
         meta = f.metadata
         cells = (
             f"`{prefix}{f.name}`",
-            _allowed(meta),
+            allowed(meta),
             meta["unit"] or "-",
             _default(f),
             meta["doc"],

@@ -27,7 +27,7 @@ Tree = dict[str, Any]
 INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
 
 
-def _suggest(name: str, candidates: Iterable[str]) -> str:
+def suggest(name: str, candidates: Iterable[str]) -> str:
     close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
 
@@ -57,12 +57,12 @@ def _show(value: Any) -> str:
     return str(value)
 
 
-def _quote(name: str) -> str:
+def quote(name: str) -> str:
     """A key, preset name or path in quotes, escaped so that it stays on one line."""
     return f"'{name}'" if name.isprintable() else repr(name)
 
 
-def _allowed(meta: Mapping[str, Any]) -> str:
+def allowed(meta: Mapping[str, Any]) -> str:
     kind = meta["kind"]
     if kind == "choice":
         return "one of " + ", ".join(f"'{c}'" for c in meta["choices"])
@@ -88,16 +88,16 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
     """Return ``value`` converted to the field's type, or raise InputError."""
 
     def bad() -> InputError:
-        return InputError(f"{key} = {_show(value)} is not allowed: expected {_allowed(meta)}")
+        return InputError(f"{key} = {_show(value)} is not allowed: expected {allowed(meta)}")
 
     kind = meta["kind"]
     if value is None and meta.get("nullable"):
         return None
     if kind == "choice":
         if not isinstance(value, str) or value not in meta["choices"]:
-            suggestion = _suggest(value, meta["choices"]) if isinstance(value, str) else ""
+            suggestion = suggest(value, meta["choices"]) if isinstance(value, str) else ""
             raise InputError(
-                f"{key} = {_show(value)} is not allowed: expected {_allowed(meta)}{suggestion}"
+                f"{key} = {_show(value)} is not allowed: expected {allowed(meta)}{suggestion}"
             )
         return value
     if kind == "str":
@@ -127,7 +127,7 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
             raise bad()
         if not INT64_MIN <= value <= INT64_MAX:
             raise InputError(
-                f"{key} = {value} is not allowed: expected {_allowed(meta)} (64-bit integer)"
+                f"{key} = {value} is not allowed: expected {allowed(meta)} (64-bit integer)"
             )
         number: float = value
     else:
@@ -155,7 +155,7 @@ def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
         if key not in fields:
             where = f"[{prefix[:-1]}]" if prefix else "the scene"
             raise InputError(
-                f"unknown key {_quote(prefix + key)} in {where}{_suggest(key, fields)}; "
+                f"unknown key {quote(prefix + key)} in {where}{suggest(key, fields)}; "
                 f"allowed: {', '.join(fields)}"
             )
     kwargs: dict[str, Any] = {}
@@ -209,7 +209,7 @@ def read_scene_file(path: str | Path) -> Tree:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
-        raise InputError(f"cannot read scene file {_quote(str(p))}: {reason}") from None
+        raise InputError(f"cannot read scene file {quote(str(p))}: {reason}") from None
     return parse_toml(text, str(p))
 
 
@@ -228,7 +228,7 @@ def parse_override(item: str) -> tuple[str, Any]:
             value = raw
         else:
             raise InputError(
-                f"--set {_quote(key)}: cannot read the value {raw!r} as a TOML value"
+                f"--set {quote(key)}: cannot read the value {raw!r} as a TOML value"
             ) from None
     return key, value
 
@@ -247,7 +247,7 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
                 where = f"[{prefix}]" if prefix else "the scene"
                 full = ".".join([*parts[:depth], part])
                 raise InputError(
-                    f"unknown key {_quote(full)} in {where}{_suggest(part, fields)}; "
+                    f"unknown key {quote(full)} in {where}{suggest(part, fields)}; "
                     f"allowed: {', '.join(fields)}"
                 )
             f = fields[part]

@@ -8,12 +8,12 @@ from typing import Any
 
 from jellysim.config.load import (
     Tree,
-    _quote,
-    _suggest,
     apply_overrides,
     parse_override,
+    quote,
     read_scene_file,
     scene_from_tree,
+    suggest,
 )
 from jellysim.config.schema import Scene
 from jellysim.errors import InputError
@@ -29,7 +29,7 @@ def scene_source_tree(source: str | Path) -> Tree:
     if path.suffix.lower() == ".toml" or path.exists() or "/" in text:
         return read_scene_file(path)
     raise InputError(
-        f"unknown preset {_quote(text)}{_suggest(text, preset_names())}; "
+        f"unknown preset {quote(text)}{suggest(text, preset_names())}; "
         f"presets: {', '.join(preset_names())} (or give a .toml file)"
     )
 

@@ -28,8 +28,10 @@ def param(default: Any, *, unit: str = "", doc: str, kind: str = "float", **spec
 
 @dataclass(frozen=True)
 class Water:
-    density: float = param(1000.0, unit="kg/m3", doc="density of the water", gt=0.0)
-    viscosity: float = param(1.0e-3, unit="Pa s", doc="dynamic viscosity of the water", gt=0.0)
+    density: float = param(1000.0, unit="kg/m3", doc="density of the water", ge=1.0e-3, le=1.0e5)
+    viscosity: float = param(
+        1.0e-3, unit="Pa s", doc="dynamic viscosity of the water", ge=1.0e-8, le=1.0e6
+    )
     gravity: tuple[float, float, float] = param(
         (0.0, 0.0, -9.81), unit="m/s2", kind="vec3", doc="gravitational acceleration (z up)"
     )
@@ -40,15 +42,22 @@ class Flow:
     speed: float = param(
         0.3,
         unit="m/s",
+        ge=-100.0,
+        le=100.0,
         doc="speed of the water relative to the bell, along the bell axis from root to tip",
     )
     noise: float = param(
-        0.0, unit="m/s", ge=0.0, doc="standard deviation of each component of the flow noise"
+        0.0,
+        unit="m/s",
+        ge=0.0,
+        le=100.0,
+        doc="standard deviation of each component of the flow noise",
     )
     noise_correlation_time: float = param(
         0.5,
         unit="s",
-        gt=0.0,
+        ge=1.0e-3,
+        le=1.0e4,
         doc="correlation time of the smooth (Ornstein-Uhlenbeck) flow noise, one per tentacle",
     )
 
@@ -60,15 +69,16 @@ class Tentacles:
         60, kind="int", ge=3, le=100000, doc="particles per tentacle, root included"
     )
     spacing: float = param(
-        0.01, unit="m", gt=0.0, doc="particle spacing d, also the tentacle diameter"
+        0.01, unit="m", ge=1.0e-6, le=10.0, doc="particle spacing d, also the tentacle diameter"
     )
     youngs_modulus: float = param(
-        100.0, unit="Pa", gt=0.0, doc="Young's modulus E of the tentacle material"
+        100.0, unit="Pa", ge=1.0e-3, le=1.0e13, doc="Young's modulus E of the tentacle material"
     )
     density: float | None = param(
         None,
         unit="kg/m3",
-        gt=0.0,
+        ge=1.0e-3,
+        le=1.0e5,
         nullable=True,
         doc="density of the tentacle material (default: the water density, neutrally buoyant)",
     )
@@ -97,8 +107,8 @@ class Bell:
         choices=("none",),
         doc="bell model driving the tentacle roots",
     )
-    radius: float = param(0.15, unit="m", gt=0.0, doc="margin radius of the bell")
-    period: float = param(1.0, unit="s", gt=0.0, doc="pulse period of the bell")
+    radius: float = param(0.15, unit="m", gt=0.0, le=1.0e3, doc="margin radius of the bell")
+    period: float = param(1.0, unit="s", ge=1.0e-3, le=1.0e4, doc="pulse period of the bell")
     contraction: float = param(
         0.0,
         ge=0.0,
@@ -110,9 +120,15 @@ class Bell:
 @dataclass(frozen=True)
 class RootMotion:
     amplitude: float = param(
-        0.0, unit="m", ge=0.0, doc="amplitude of the forced root oscillation (bell.model = none)"
+        0.0,
+        unit="m",
+        ge=0.0,
+        le=1.0e3,
+        doc="amplitude of the forced root oscillation (bell.model = none)",
     )
-    frequency: float = param(1.0, unit="Hz", ge=0.0, doc="frequency of the root oscillation")
+    frequency: float = param(
+        1.0, unit="Hz", ge=0.0, le=1.0e3, doc="frequency of the root oscillation"
+    )
     direction: str | tuple[float, float, float] = param(
         "radial",
         kind="direction",
@@ -124,7 +140,7 @@ class RootMotion:
 class Solver:
     dt_safety: float = param(
         1.0,
-        gt=0.0,
+        ge=1.0e-3,
         le=10.0,
         doc="factor on the substep the code chooses (smaller: more accurate; for studies)",
     )
@@ -135,7 +151,9 @@ class Solver:
 
 @dataclass(frozen=True)
 class Scene:
-    name: str = param("scene", kind="str", pattern=r"^[A-Za-z0-9_.-]+$", doc="name of the scene")
+    name: str = param(
+        "scene", kind="str", pattern=r"^(?!\.+$)[A-Za-z0-9_.-]+$", doc="name of the scene"
+    )
     duration: float = param(10.0, unit="s", gt=0.0, le=1.0e6, doc="simulated time")
     fps: float = param(30.0, unit="1/s", gt=0.0, le=10000.0, doc="frames stored per second")
     seed: int = param(1, kind="int", ge=0, doc="seed of every random draw (flow noise)")

@@ -68,23 +68,28 @@ class ResultWriter:
         self.path = path
         temporary = path.with_name(path.name + ".tmp")
         f = h5py.File(temporary, "w", libver="latest")
-        for spec in datasets:
-            data = None if initial is None else initial[spec.path]
-            rows = 0 if data is None else data.shape[0]
-            chunk_rows = max(1, min(64, 2**20 // max(1, 8 * int(np.prod(spec.frame_shape)))))
-            ds = f.create_dataset(
-                spec.path,
-                shape=(rows, *spec.frame_shape),
-                maxshape=(None, *spec.frame_shape),
-                chunks=(chunk_rows, *spec.frame_shape),
-                dtype=spec.dtype,
-                data=data,
-            )
-            ds.attrs["units"] = spec.units
-        for key, value in attributes.items():
-            f.attrs[key] = value
-        f.swmr_mode = True
-        os.replace(temporary, path)  # only now visible, already in SWMR mode (open files move)
+        try:
+            for spec in datasets:
+                data = None if initial is None else initial[spec.path]
+                rows = 0 if data is None else data.shape[0]
+                chunk_rows = max(1, min(64, 2**20 // max(1, 8 * int(np.prod(spec.frame_shape)))))
+                ds = f.create_dataset(
+                    spec.path,
+                    shape=(rows, *spec.frame_shape),
+                    maxshape=(None, *spec.frame_shape),
+                    chunks=(chunk_rows, *spec.frame_shape),
+                    dtype=spec.dtype,
+                    data=data,
+                )
+                ds.attrs["units"] = spec.units
+            for key, value in attributes.items():
+                f.attrs[key] = value
+            f.swmr_mode = True
+            os.replace(temporary, path)  # only now visible, already in SWMR mode (open files move)
+        except BaseException:
+            f.close()
+            temporary.unlink(missing_ok=True)
+            raise
         self._file = f
         self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
         self._buffer: dict[str, list[Any]] = {name: [] for name in self._datasets}

@@ -23,6 +23,7 @@ from jellysim.config import Scene, load_scene, scene_to_toml
 from jellysim.errors import InputError, SimulationUnstable
 from jellysim.io.checkpoint import load_checkpoint, remove_checkpoint, save_checkpoint
 from jellysim.io.result import RESULT_FILE, Result, ResultWriter, frame_datasets, read_frames
+from jellysim.tentacle import kernels
 from jellysim.tentacle.flow import flow_noise_for, water_velocity
 from jellysim.tentacle.kernels import advance_frame
 from jellysim.tentacle.model import chain_model_for, characteristic_speed, medium_for, plan_substeps
@@ -93,7 +94,7 @@ class Simulation:
         state, so that the first frame's timing, and the progress bar's ETA, are honest."""
         times = self.substep_times(self.frame)[:1]
         roots, root_velocities, directions = self.driver.roots(times)
-        advance_frame(
+        kernels.advance_frame(
             self.positions.copy(),
             self.velocities.copy(),
             roots,
@@ -136,7 +137,8 @@ class Simulation:
     def _watchdog(self, times: np.ndarray) -> None:
         failed = self.diagnostics[:, 2]
         if np.any(failed >= 0):
-            chain = int(np.argmax(failed >= 0))
+            # The chain that failed first (lowest substep), the lowest index among equals.
+            chain = int(np.argmin(np.where(failed >= 0, failed, np.inf)))
             when = float(times[int(failed[chain])])
             raise SimulationUnstable(
                 f"unstable at t = {when:.6g} s in tentacle {chain}: the state became non-finite "
@@ -147,9 +149,16 @@ class Simulation:
             )
         rms = np.sqrt(np.mean(np.sum(self.velocities**2, axis=2), axis=1))
         finite = np.isfinite(rms) & np.all(np.isfinite(self.positions), axis=(1, 2))
-        if not np.all(finite) or np.any(rms > self.speed_limit):
-            bad = ~finite | (rms > self.speed_limit)
-            chain = int(np.argmax(bad))
+        if not np.all(finite):
+            chain = int(np.argmax(~finite))
+            raise SimulationUnstable(
+                f"unstable at t = {self.time:.6g} s in tentacle {chain}: the state became "
+                "non-finite; lower solver.dt_safety or check the scene's forces",
+                time=self.time,
+                tentacle=chain,
+            )
+        if np.any(rms > self.speed_limit):
+            chain = int(np.argmax(rms > self.speed_limit))
             raise SimulationUnstable(
                 f"runaway energy at t = {self.time:.6g} s in tentacle {chain}: RMS speed "
                 f"{rms[chain]:.3g} m/s exceeds {self.speed_limit:.3g} m/s; lower solver.dt_safety "

@@ -14,8 +14,10 @@ import math
 import numpy as np
 
 from jellysim.config.schema import Scene
+from jellysim.errors import InputError
 
 KNOTS_PER_CORRELATION_TIME = 4
+MAX_NOISE_VALUES = 50_000_000  # knots x tentacles (x 3 components, 8 bytes): 1.2 GB
 
 
 class FlowNoise:
@@ -27,6 +29,12 @@ class FlowNoise:
         self.amplitude = amplitude
         self.spacing = correlation_time / KNOTS_PER_CORRELATION_TIME
         n_knots = math.ceil(duration / self.spacing) + 4
+        if n_knots * count > MAX_NOISE_VALUES:
+            raise InputError(
+                f"flow.noise_correlation_time = {correlation_time:g} s is too short for a "
+                f"{duration:g} s run of {count} tentacles: at least "
+                f"{duration * count * KNOTS_PER_CORRELATION_TIME / MAX_NOISE_VALUES:.3g} s"
+            )
         knots = np.zeros((n_knots, count, 3))
         if amplitude > 0.0:
             a = math.exp(-self.spacing / correlation_time)
@@ -46,7 +54,7 @@ class FlowNoise:
             return np.zeros((times.size, self.knots.shape[1], 3))
         u = times / self.spacing + 1.0
         j = np.clip(np.floor(u).astype(np.int64), 1, self.knots.shape[0] - 3)
-        s = (u - j)[:, None, None]
+        s = np.clip(u - j, 0.0, 1.0)[:, None, None]  # never extrapolate past the knots
         p0, p1, p2, p3 = (self.knots[j + o] for o in (-1, 0, 1, 2))
         # Catmull-Rom: C1, passes through the knots.
         return 0.5 * (
@@ -59,9 +67,10 @@ class FlowNoise:
 
 def flow_noise_for(scene: Scene) -> FlowNoise:
     f = scene.flow
-    return FlowNoise(
-        f.noise, f.noise_correlation_time, scene.duration, scene.tentacles.count, scene.seed
-    )
+    # Knots cover the last frame, round(duration * fps) / fps, which may pass the duration.
+    last_frame = (scene.frame_count - 1) / scene.fps
+    span = max(scene.duration, last_frame)
+    return FlowNoise(f.noise, f.noise_correlation_time, span, scene.tentacles.count, scene.seed)
 
 
 def water_velocity(

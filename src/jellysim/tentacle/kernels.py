@@ -8,7 +8,7 @@ prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T
 2. one backward-Euler step of bending (Eq. T2) and drag, constrained by the segment lengths
    linearised at the start of the step: the saddle-point (KKT) system
    ``[A  J^T; J  0] [x; lambda] = [M (x + dt v) + dt K_d x + dt^2 (f + K_d u); d]`` with
-   ``A = M + dt K_d + dt^2 c K``, interleaved per particle into a band of half-width 10 and
+   ``A = M + dt K_d + dt^2 c K``, interleaved per particle into a band of half-width 8 and
    solved by a banded LDL^T factorisation in O(P) (Eq. T7); re-linearised at the new iterate
    while a length is off by more than 1e-3,
 3. exact projection onto ``|x_{i+1} - x_i| = d`` by Newton iterations of the fast projection
@@ -140,10 +140,12 @@ def bending_forces(
 
 
 KKT_BLOCK = 4  # unknowns per particle in the saddle-point system: x, y, z and one multiplier
-KKT_HALF_BANDWIDTH = 10  # x_i couples to x_{i+2}: 2 blocks + 2 components
+KKT_HALF_BANDWIDTH = 8  # x_i couples to the same component of x_{i+2}: 2 blocks
 
 
-@njit(cache=True, fastmath=True, error_model="numpy")
+# fastmath limited to reassociation and contraction (vectorised sums): no-NaN/no-inf
+# assumptions would hide the divergence the watchdog must see.
+@njit(cache=True, fastmath={"reassoc", "contract"}, error_model="numpy")
 def _band_ldlt_solve(band: np.ndarray, pivots: np.ndarray, rhs: np.ndarray) -> None:
     """Solve a symmetric banded system in place by LDL^T without pivoting.
 

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from jellysim.config.schema import Scene
+from jellysim.errors import InputError
 from jellysim.tentacle.kernels import ChainModel, Medium, drag_gain
-
-log = logging.getLogger(__name__)
 
 # Cube of the span L of the paper's three-point bending cell, in units of d^3 (Eq. T2).
 # "euler-bernoulli": L^3 = 12 d^3 makes the chain's continuum stiffness exactly EI;
@@ -19,6 +17,8 @@ log = logging.getLogger(__name__)
 SPAN_CUBED = {"euler-bernoulli": 12.0, "ewing": 8.0}
 
 CANTILEVER_FIRST_ROOT = 1.8751040687119611  # beta_1 L of a clamped-free beam
+TENSION_COURANT = 2.0  # segments a tension wave may cross per substep
+MAX_SUBSTEPS_PER_FRAME = 100_000
 
 
 def second_moment(diameter: float) -> float:
@@ -143,7 +143,11 @@ def plan_substeps(scene: Scene) -> SubstepPlan:
     accuracy: a tenth of the period over 2 pi of the chain's first cantilever mode
     ``omega_1 = (1.875 / L)^2 sqrt(EI_eff / (rho_t A))``; half the drag relaxation time
     ``m / k(U)`` at the characteristic relative speed U; a hundredth of the root-motion period;
-    a twentieth of the noise correlation time; and the frame interval.
+    a twentieth of the noise correlation time; the frame interval; and a Courant number of 2
+    for the tension waves along the chain, ``dt <= 2 d / c`` with ``c = sqrt(T / (rho_t A))`` and
+    T the tension that drag, buoyant weight and the root's acceleration can build up over the
+    chain (the length constraints are linearised over a step, so a wave may cross only a few
+    segments per step).
     """
     t = scene.tentacles
     frame_dt = 1.0 / scene.fps
@@ -158,18 +162,34 @@ def plan_substeps(scene: Scene) -> SubstepPlan:
     gain = drag_gain(
         max(characteristic_speed(scene), 1e-12), d, scene.water.density, scene.water.viscosity
     )
+    rm = scene.root_motion
+    speed = characteristic_speed(scene)
+    volume = area * d
+    gravity = math.sqrt(sum(g * g for g in scene.water.gravity))
+    per_particle = (
+        gain * speed
+        + abs(scene.tentacle_density - scene.water.density) * volume * gravity
+        + mass * rm.amplitude * (2.0 * math.pi * rm.frequency) ** 2
+    )
+    tension = (t.particles - 1) * per_particle
+    wave_speed = math.sqrt(tension / (scene.tentacle_density * area))
     limits = {
         "bending": 0.1 / omega_1,
         "drag": 0.5 * mass / gain,
         "frame": frame_dt,
     }
-    rm = scene.root_motion
+    if wave_speed > 0.0:
+        limits["tension"] = TENSION_COURANT * d / wave_speed
     if rm.amplitude > 0.0 and rm.frequency > 0.0:
         limits["root motion"] = 0.01 / rm.frequency
     if scene.flow.noise > 0.0:
         limits["noise"] = scene.flow.noise_correlation_time / 20.0
     target = scene.solver.dt_safety * min(limits.values())
     substeps = max(1, math.ceil(frame_dt / target - 1e-9))
-    plan = SubstepPlan(dt=frame_dt / substeps, substeps=substeps, limits=limits)
-    log.info("tentacles: %s", plan.describe())
-    return plan
+    binding = min(limits, key=limits.__getitem__)
+    if substeps > MAX_SUBSTEPS_PER_FRAME:
+        raise InputError(
+            f"the scene needs {substeps:.3g} substeps per frame (limited by {binding}): "
+            f"at most {MAX_SUBSTEPS_PER_FRAME}; raise solver.dt_safety or fps, or soften the scene"
+        )
+    return SubstepPlan(dt=frame_dt / substeps, substeps=substeps, limits=limits)

@@ -1,0 +1,43 @@
+"""The substep plan (docs/theory/tentacle.md §5): chosen by the code, scaled by dt_safety."""
+
+import pytest
+
+import jellysim
+from jellysim.errors import InputError
+from jellysim.tentacle.model import plan_substeps
+
+
+def plan(**overrides):
+    return plan_substeps(jellysim.load_scene("brown-jelly", overrides))
+
+
+def test_substeps_fill_the_frame_exactly():
+    for fps in (30.0, 7.0):
+        for modulus in (1e2, 9e9):
+            p = plan(fps=fps, **{"tentacles.youngs_modulus": modulus})
+            assert p.dt * p.substeps == pytest.approx(1 / fps, rel=1e-12)
+            assert p.dt <= min(p.limits.values()) * (1 + 1e-12)
+
+
+def test_stiff_rods_get_a_bending_limited_but_affordable_substep():
+    soft, wood = plan(), plan(**{"tentacles.youngs_modulus": 9e9})
+    assert min(soft.limits, key=soft.limits.get) != "bending"
+    assert min(wood.limits, key=wood.limits.get) == "bending"
+    assert wood.dt < soft.dt
+    assert wood.dt > 100 * 5e-6  # an explicit step would need about 5 microseconds
+
+
+def test_dt_safety_scales_the_substep():
+    for safety in (0.5, 0.1):
+        p = plan(**{"solver.dt_safety": safety})
+        assert p.dt <= safety * min(p.limits.values()) * (1 + 1e-12)
+        assert p.substeps >= 2  # the frame limit does not bind here
+
+
+def test_faster_flows_get_shorter_substeps():
+    assert plan(**{"flow.speed": 10.0}).dt < plan(**{"flow.speed": 0.3}).dt
+
+
+def test_an_unaffordable_substep_is_an_input_error():
+    with pytest.raises(InputError, match="substeps per frame"):
+        plan(**{"tentacles.youngs_modulus": 1e13, "tentacles.particles": 3, "fps": 0.01})
