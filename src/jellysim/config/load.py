@@ -153,11 +153,7 @@ def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
     fields = _fields(cls)
     for key in tree:
         if key not in fields:
-            where = f"[{prefix[:-1]}]" if prefix else "the scene"
-            raise InputError(
-                f"unknown key {quote(prefix + key)} in {where}{suggest(key, fields)}; "
-                f"allowed: {', '.join(fields)}"
-            )
+            raise _unknown_key(prefix[:-1], key, fields)
     kwargs: dict[str, Any] = {}
     for name, f in fields.items():
         if name not in tree:
@@ -172,6 +168,16 @@ def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
         else:
             kwargs[name] = _check_value(prefix + name, value, f.metadata)
     return cls(**kwargs)
+
+
+def _unknown_key(table: str, key: str, fields: Iterable[str]) -> InputError:
+    """The error for ``key`` not among ``fields`` of ``table`` ("" for the top level)."""
+    where = f"[{table}]" if table else "the scene"
+    full = f"{table}.{key}" if table else key
+    return InputError(
+        f"unknown key {quote(full)} in {where}{suggest(key, fields)}; "
+        f"allowed: {', '.join(fields)}"
+    )
 
 
 def scene_from_tree(tree: Mapping[str, Any]) -> Scene:
@@ -244,12 +250,7 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
             fields = _fields(cls)
             prefix = ".".join(parts[:depth])
             if part not in fields:
-                where = f"[{prefix}]" if prefix else "the scene"
-                full = ".".join([*parts[:depth], part])
-                raise InputError(
-                    f"unknown key {quote(full)} in {where}{suggest(part, fields)}; "
-                    f"allowed: {', '.join(fields)}"
-                )
+                raise _unknown_key(prefix, part, fields)
             f = fields[part]
             last = depth == len(parts) - 1
             if _is_section(f):
