@@ -41,6 +41,7 @@ test-all: $(BIN)/jellysim
 
 lint: $(BIN)/jellysim
 	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/mypy
 
 # Regenerate the scene reference from the dataclasses.
 docs: $(BIN)/jellysim

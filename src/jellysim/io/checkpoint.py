@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +25,8 @@ def save_checkpoint(
     path = folder / CHECKPOINT_FILE
     temporary = folder / (CHECKPOINT_FILE + ".tmp")
     with open(temporary, "wb") as handle:
-        np.savez(handle, frame=np.int64(frame), scene=np.array(scene_toml), **state)
+        arrays: dict[str, Any] = {"frame": np.int64(frame), "scene": np.array(scene_toml), **state}
+        np.savez(handle, **arrays)
         handle.flush()
         os.fsync(handle.fileno())
     os.replace(temporary, path)
