@@ -11,6 +11,7 @@ Python API (the same powers as the command line)::
 
 from jellysim.config import Scene, load_scene, scene_to_toml
 from jellysim.errors import InputError, JellysimError, SimulationUnstable
+from jellysim.interpolation import interpolate_result
 from jellysim.io.result import Result, open_result
 from jellysim.simulation import Simulation, run
 from jellysim.species import preset_names
@@ -25,6 +26,7 @@ __all__ = [
     "Simulation",
     "SimulationUnstable",
     "__version__",
+    "interpolate_result",
     "load_scene",
     "open_result",
     "preset_names",

@@ -175,8 +175,7 @@ def _unknown_key(table: str, key: str, fields: Iterable[str]) -> InputError:
     where = f"[{table}]" if table else "the scene"
     full = f"{table}.{key}" if table else key
     return InputError(
-        f"unknown key {quote(full)} in {where}{suggest(key, fields)}; "
-        f"allowed: {', '.join(fields)}"
+        f"unknown key {quote(full)} in {where}{suggest(key, fields)}; allowed: {', '.join(fields)}"
     )
 
 

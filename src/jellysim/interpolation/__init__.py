@@ -1,0 +1,195 @@
+"""Cosine interpolation of tentacles (paper §4.1.3): many drawn tentacles from a few simulated.
+
+A render-time operation on a result, never part of the physics state. Between neighbouring
+simulated tentacles k and k+1 around the rim (the last wrapping to the first), drawn tentacle
+j = 0..N-1 at fraction ``t = j / N`` gets (docs/theory/interpolation.md):
+
+- its root on the margin, at the angle ``phi_k + t (phi_{k+1} - phi_k)`` about the bell axis,
+- its shape blended in each root's local frame (radial, tangential, axial) with the paper's
+  cosine weight ``w = (1 - cos(pi t)) / 2``: ``s = (1 - w) s_k + w s_{k+1}``,
+- its segment lengths restored to d by walking the blended polyline from the root,
+- a time lag that breaks up the banding of cosine weights (shapes bunch near the simulated
+  tentacles): every other drawn tentacle shows its shape ``lag`` earlier, so that neighbours
+  always differ by about as much; simulated tentacles keep lag 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def cosine_weight(t: np.ndarray) -> np.ndarray:
+    """The paper's cosine interpolation weight, ``(1 - cos(pi t)) / 2`` for t in [0, 1]."""
+    return 0.5 * (1.0 - np.cos(np.pi * np.asarray(t, dtype=np.float64)))
+
+
+def local_frames(roots: np.ndarray, centre: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Orthonormal frames (..., 3, 3) at ``roots`` (..., 3): rows radial, tangential, axial.
+
+    ``centre`` and ``axis`` broadcast against ``roots``.
+    """
+    axis = np.asarray(axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+    radial = roots - centre
+    radial = radial - np.sum(radial * axis, axis=-1, keepdims=True) * axis
+    norm = np.linalg.norm(radial, axis=-1, keepdims=True)
+    # A root on the axis has no radial direction: take one perpendicular to the axis.
+    helper = np.where(np.abs(axis[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    fallback = np.cross(axis, helper)
+    fallback = fallback / np.linalg.norm(fallback, axis=-1, keepdims=True)
+    radial = np.where(norm > 1e-12, radial / np.maximum(norm, 1e-300), fallback)
+    axis = np.broadcast_to(axis, radial.shape)
+    tangential = np.cross(axis, radial)
+    return np.stack([radial, tangential, axis], axis=-2)
+
+
+def _angles(points: np.ndarray, centre: np.ndarray, frame0: np.ndarray) -> np.ndarray:
+    rel = points - centre
+    return np.arctan2(rel @ frame0[1], rel @ frame0[0])
+
+
+def margin_point(
+    margin: np.ndarray, centre: np.ndarray, frame0: np.ndarray, angles: np.ndarray
+) -> np.ndarray:
+    """Points of the closed polyline ``margin`` (R, 3) at ``angles`` about the centre.
+
+    The margin is star-shaped about its centre (true of a bell's rim): the point at angle phi is
+    where the polyline crosses that half-plane, linearly between its vertices.
+    """
+    vertex_angles = np.unwrap(_angles(margin, centre, frame0))
+    closed = np.vstack([margin, margin[:1]])
+    turn = np.sign(vertex_angles[-1] - vertex_angles[0]) or 1.0
+    closed_angles = np.append(vertex_angles, vertex_angles[0] + turn * 2.0 * np.pi)
+    if turn < 0:
+        closed, closed_angles = closed[::-1], closed_angles[::-1]
+    start = closed_angles[0]
+    wrapped = start + np.mod(np.asarray(angles) - start, 2.0 * np.pi)
+    index = np.clip(np.searchsorted(closed_angles, wrapped) - 1, 0, len(closed) - 2)
+    # Where the ray from the centre at that angle crosses the edge (in the margin's plane).
+    p0, p1 = closed[index] - centre, closed[index + 1] - centre
+    a0 = np.stack([p0 @ frame0[0], p0 @ frame0[1]], axis=-1)
+    b = np.stack([(p1 - p0) @ frame0[0], (p1 - p0) @ frame0[1]], axis=-1)
+    u = np.stack([np.cos(wrapped), np.sin(wrapped)], axis=-1)
+    cross_ua = u[..., 0] * a0[..., 1] - u[..., 1] * a0[..., 0]
+    cross_ub = u[..., 0] * b[..., 1] - u[..., 1] * b[..., 0]
+    f = np.clip(-cross_ua / np.where(cross_ub == 0.0, 1.0, cross_ub), 0.0, 1.0)[..., None]
+    return centre + (1.0 - f) * p0 + f * p1
+
+
+def interpolation_lags(count: int, factor: int, spread: float) -> np.ndarray:
+    """Time lag (s) of each drawn tentacle: simulated ones 0, the others alternately
+    ``spread`` and 0 around the rim, so that every pair of neighbours differs by the same lag
+    (for an odd factor the last one before each simulated tentacle takes ``spread / 2``)."""
+    slot = np.arange(count * factor) % factor
+    lags = np.where(slot % 2 == 1, spread, 0.0)
+    if factor % 2 == 1 and factor > 1:
+        lags[slot == factor - 1] = 0.5 * spread
+    return lags
+
+
+def interpolate_tentacles(
+    positions: np.ndarray,
+    margin: np.ndarray,
+    times: np.ndarray,
+    factor: int,
+    spacing: float,
+    axis: np.ndarray | None = None,
+    lag_spread: float = 0.0,
+) -> np.ndarray:
+    """Drawn tentacles (F, T * factor, P, 3) from simulated ones (F, T, P, 3).
+
+    ``margin`` (F, R, 3) is the margin polyline per frame, ``times`` (F,) the frame times (s),
+    ``axis`` the bell axis (default +z, or (F, 3) per frame), ``spacing`` d (m), ``lag_spread``
+    the largest time lag (s) of a drawn tentacle (0 turns the lags off). Drawn tentacle
+    ``k * factor`` is simulated tentacle k, unchanged.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    n_frames, count, particles, _ = positions.shape
+    if factor < 1:
+        raise ValueError("factor must be >= 1")
+    axes = np.broadcast_to(
+        np.array([0.0, 0.0, 1.0]) if axis is None else np.asarray(axis, dtype=np.float64),
+        (n_frames, 3),
+    )
+    drawn = count * factor
+    t = (np.arange(drawn) % factor) / factor
+    weight = cosine_weight(t)
+    left = np.arange(drawn) // factor
+    right = (left + 1) % count
+    lags = interpolation_lags(count, factor, lag_spread)
+
+    # Shapes in each simulated root's local frame, per frame: (F, T, P, 3).
+    centres = margin.mean(axis=1)
+    roots = positions[:, :, 0]
+    frames_sim = local_frames(roots, centres[:, None], axes[:, None])
+    shapes = np.einsum("ftij,ftpj->ftpi", frames_sim, positions - roots[:, :, None])
+
+    # Shapes at lagged times: linear in time between stored frames, held at the ends.
+    sample = np.clip(
+        np.interp(times[:, None] - lags[None, :], times, np.arange(n_frames)), 0, n_frames - 1
+    )
+    lo = np.floor(sample).astype(np.int64)
+    hi = np.minimum(lo + 1, n_frames - 1)
+    frac = (sample - lo)[..., None, None]
+
+    def lagged(k: np.ndarray) -> np.ndarray:
+        return (1.0 - frac) * shapes[lo, k] + frac * shapes[hi, k]
+
+    blended = (1.0 - weight)[None, :, None, None] * lagged(left) + weight[
+        None, :, None, None
+    ] * lagged(right)
+
+    out = np.empty((n_frames, drawn, particles, 3))
+    for f in range(n_frames):
+        frame0 = local_frames(roots[f, 0], centres[f], axes[f])
+        phi = np.unwrap(_angles(roots[f], centres[f], frame0))
+        step = np.mod(np.roll(phi, -1) - phi, 2.0 * np.pi)
+        if count == 1:
+            step[:] = 2.0 * np.pi
+        angle = phi[left] + t * step[left]
+        new_roots = margin_point(margin[f], centres[f], frame0, angle)
+        new_roots[t == 0] = roots[f, left[t == 0]]  # simulated roots exactly
+        frames_new = local_frames(new_roots, centres[f], axes[f])
+        world = np.einsum("tij,tpi->tpj", frames_new, blended[f])  # back from local frames
+        segments = np.diff(world, axis=1)
+        lengths = np.linalg.norm(segments, axis=2, keepdims=True)
+        units = segments / np.maximum(lengths, 1e-300)
+        out[f, :, 0] = new_roots
+        out[f, :, 1:] = new_roots[:, None] + spacing * np.cumsum(units, axis=1)
+    # Simulated tentacles are drawn exactly as simulated.
+    simulated = np.arange(0, drawn, factor)
+    out[:, simulated] = positions
+    return out
+
+
+LAG_FRACTION_OF_PULSE = 0.25  # default lag: a quarter of the pulse period
+
+
+def pulse_period(scene: object) -> float:
+    """The period (s) of the root forcing of a scene: the root motion's for bell.model "none"."""
+    bell = scene.bell  # type: ignore[attr-defined]
+    if bell.model == "none":
+        frequency = scene.root_motion.frequency  # type: ignore[attr-defined]
+        return 1.0 / frequency if frequency > 0.0 else float(bell.period)
+    return float(bell.period)
+
+
+def interpolate_result(
+    result: object, factor: int | None = None, lag: float | None = None
+) -> np.ndarray:
+    """Drawn tentacles (F, T * factor, P, 3) of an open result.
+
+    ``factor`` defaults to the scene's ``tentacles.interpolation``; ``lag`` (s) to a quarter of
+    the pulse period (0 turns the anti-banding lag off).
+    """
+    scene = result.scene  # type: ignore[attr-defined]
+    factor = scene.tentacles.interpolation if factor is None else factor
+    lag = LAG_FRACTION_OF_PULSE * pulse_period(scene) if lag is None else lag
+    return interpolate_tentacles(
+        result.tentacle_positions,  # type: ignore[attr-defined]
+        result.margin,  # type: ignore[attr-defined]
+        result.time,  # type: ignore[attr-defined]
+        factor,
+        scene.tentacles.spacing,
+        lag_spread=lag,
+    )
