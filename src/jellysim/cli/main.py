@@ -45,6 +45,24 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("dir", help="folder holding result.h5")
     plot.add_argument("--out", help="folder for the figures (default: DIR/plots)")
 
+    sweep = sub.add_parser(
+        "sweep", help="run a scene once per value of a key; root and tip x against time"
+    )
+    sweep.add_argument("scene", help="preset name or path to a .toml")
+    sweep.add_argument("--key", required=True, help="the scene key to vary, e.g. flow.speed")
+    sweep.add_argument("--values", required=True, help="comma-separated TOML values")
+    sweep.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scene key for every run",
+    )
+    sweep.add_argument("--tentacle", type=int, default=0, help="which tentacle (default 0)")
+    sweep.add_argument("--out", default="out/sweeps", help="folder for the figure and the CSV")
+    sweep.add_argument("--title", default="", help="figure title")
+
     sub.add_parser("presets", help="list the presets")
     show = sub.add_parser("show", help="print a preset's TOML")
     show.add_argument("name")
@@ -80,6 +98,29 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from jellysim.config.load import parse_override
+    from jellysim.studies import plot_sweep, sweep, write_traces_csv
+
+    values = [parse_override(f"v={item}")[1] for item in args.values.split(",") if item.strip()]
+    if not values:
+        raise InputError("--values: give at least one value, e.g. --values 100,2.4e5,9e9")
+    traces = sweep(args.scene, args.key, values, args.overrides, args.tentacle)
+    folder = Path(args.out)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        stem = folder / f"sweep_{args.key.replace('.', '_')}"
+        paths = [
+            plot_sweep(traces, args.key, stem.with_suffix(".png"), args.title),
+            write_traces_csv(traces, args.key, stem.with_suffix(".csv")),
+        ]
+    except OSError as err:
+        raise InputError(f"--out {folder}: cannot write ({err.strerror})") from None
+    for path in paths:
+        print(path)
+    return 0
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from jellysim.species import preset_names, preset_summary
 
@@ -103,7 +144,13 @@ def _cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS = {"run": _cmd_run, "plot": _cmd_plot, "presets": _cmd_presets, "show": _cmd_show}
+COMMANDS = {
+    "run": _cmd_run,
+    "plot": _cmd_plot,
+    "sweep": _cmd_sweep,
+    "presets": _cmd_presets,
+    "show": _cmd_show,
+}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
