@@ -48,11 +48,16 @@ def load_checkpoint(folder: Path, scene_toml: str) -> tuple[int, dict[str, np.nd
     except (OSError, ValueError, KeyError) as err:
         raise InputError(f"cannot read checkpoint '{path}': {err}") from None
     if saved_scene != scene_toml:
-        raise InputError(
-            f"cannot resume '{folder}': the scene differs from the run being resumed "
-            "(compare with its scene.toml, or run with --force to start again)"
-        )
+        raise scene_mismatch(folder)
     return frame, state
+
+
+def scene_mismatch(folder: Path) -> InputError:
+    """The error for resuming ``folder`` with a scene other than the one it was run with."""
+    return InputError(
+        f"cannot resume '{folder}': the scene differs from the run being resumed "
+        "(compare with its scene.toml, or run with --force to start again)"
+    )
 
 
 def remove_checkpoint(folder: Path) -> None:

@@ -21,7 +21,12 @@ import numpy as np
 from jellysim.bell import RootDriver, make_root_driver
 from jellysim.config import Scene, load_scene, scene_to_toml
 from jellysim.errors import InputError, SimulationUnstable
-from jellysim.io.checkpoint import load_checkpoint, remove_checkpoint, save_checkpoint
+from jellysim.io.checkpoint import (
+    load_checkpoint,
+    remove_checkpoint,
+    save_checkpoint,
+    scene_mismatch,
+)
 from jellysim.io.result import RESULT_FILE, Result, ResultWriter, frame_datasets, read_frames
 from jellysim.tentacle import kernels
 from jellysim.tentacle.flow import flow_noise_for, water_velocity
@@ -249,10 +254,7 @@ def run(
             same_scene = existing.scene_text == scene_toml
             complete = existing.complete
         if not same_scene:
-            raise InputError(
-                f"cannot resume '{folder}': the scene differs from the run being resumed "
-                "(compare with its scene.toml, or run with --force to start again)"
-            )
+            raise scene_mismatch(folder)
         if complete:
             log.info("%s is complete; nothing to resume", result_path)
             return Result(folder)
