@@ -13,7 +13,7 @@ import pytest
 
 import jellysim
 
-# Short runs of the brown-jelly preset (bell.model = "none", forced radial roots).
+# Short runs of the forced-tentacles preset (bell.model = "none", forced radial roots).
 BASE = {
     "duration": 1.01,  # duration * fps = 20.2: F = round(20.2) + 1 = 21
     "fps": 20.0,
@@ -41,7 +41,7 @@ PER_FRAME = {
 
 
 def _run(folder: Path, overrides: dict[str, object]) -> jellysim.Scene:
-    scene = jellysim.load_scene("brown-jelly", {**BASE, **overrides})
+    scene = jellysim.load_scene("forced-tentacles", {**BASE, **overrides})
     jellysim.run(scene, folder, force=True).close()
     return scene
 

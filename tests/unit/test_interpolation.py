@@ -50,17 +50,22 @@ def test_drawn_tentacles_keep_roots_on_margin_lengths_and_simulated_shapes(brown
     # Segment lengths restored.
     lengths = np.linalg.norm(np.diff(drawn, axis=2), axis=3)
     np.testing.assert_allclose(lengths, scene.tentacles.spacing, rtol=1e-9)
-    # Every drawn root lies on the margin polyline (radial root motion keeps it a circle).
-    radius = np.linalg.norm(margin[:, :, :2], axis=2)
+    # Every drawn root lies on the margin polyline (the pulsing, swimming, lobed margin).
     roots = drawn[:, :, 0]
-    np.testing.assert_allclose(roots[..., 2], 0.0, atol=1e-12)
-    r = np.linalg.norm(roots[..., :2], axis=2)
-    chord_sag = 1 - np.cos(np.pi / margin.shape[1])
-    assert np.all(r <= radius.max(axis=1, keepdims=True) * (1 + 1e-12))
-    assert np.all(r >= radius.min(axis=1, keepdims=True) * (1 - chord_sag - 1e-12))
+    for f in range(0, positions.shape[0], 7):
+        assert _distance_to_polyline(roots[f], margin[f]).max() < 1e-12
     # Roots are evenly spread around the rim, the ring wrapping from the last to the first.
     angle = np.unwrap(np.arctan2(roots[0, :, 1], roots[0, :, 0]))
     np.testing.assert_allclose(np.diff(angle), 2 * np.pi / (6 * factor), rtol=1e-6)
+
+
+def _distance_to_polyline(points, polyline):
+    """Distance (m) from each point (N, 3) to the closed polyline (R, 3): a slow oracle."""
+    a, b = polyline, np.roll(polyline, -1, axis=0)
+    ab = b - a
+    t = np.einsum("nrk,rk->nr", points[:, None] - a[None], ab) / np.sum(ab * ab, axis=1)
+    closest = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+    return np.linalg.norm(points[:, None] - closest, axis=2).min(axis=1)
 
 
 def test_symmetric_tentacles_interpolate_to_rotated_copies(brown):

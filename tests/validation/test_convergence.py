@@ -24,7 +24,7 @@ BASE = {
 
 
 def tip_after_one_second(dt_safety: float) -> np.ndarray:
-    scene = jellysim.load_scene("brown-jelly", {**BASE, "solver.dt_safety": dt_safety})
+    scene = jellysim.load_scene("forced-tentacles", {**BASE, "solver.dt_safety": dt_safety})
     simulation = Simulation(scene)
     for _ in range(scene.frame_count - 1):
         simulation.step_frame()

@@ -14,7 +14,7 @@ SHORT = {"tentacles.count": 3, "duration": 2.0, "fps": 30.0}
 
 
 def run_frames(overrides):
-    scene = jellysim.load_scene("brown-jelly", {**SHORT, **overrides})
+    scene = jellysim.load_scene("forced-tentacles", {**SHORT, **overrides})
     simulation = Simulation(scene)
     frames, worst = [simulation.positions.copy()], 0.0
     for _ in range(scene.frame_count - 1):

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from jellysim.bell import register
+from jellysim.bell import Forcing, RootDriver, register
 from jellysim.config.schema import Scene
 
 MARGIN_POINTS_PER_ROOT = 8
 Z_AXIS = np.array([0.0, 0.0, 1.0])
 
 
-class ForcedRoots:
+class ForcedRoots(RootDriver):
     """Roots on a still margin, oscillated forcibly (:class:`jellysim.bell.RootDriver`)."""
 
     def __init__(
@@ -48,6 +48,13 @@ class ForcedRoots:
         velocities = self.amplitude * self.omega * np.cos(phase) * self.directions[None]
         hang = np.broadcast_to(-Z_AXIS, positions.shape).copy()
         return positions, velocities, hang
+
+    def forcing(self) -> Forcing:
+        if self.amplitude == 0.0 or self.omega == 0.0:
+            return Forcing(0.0, 0.0, 0.0)
+        return Forcing(
+            self.amplitude * self.omega, self.amplitude * self.omega**2, 2.0 * np.pi / self.omega
+        )
 
     def bell_velocity(self, times: np.ndarray) -> np.ndarray:
         return np.zeros((np.size(times), 3))

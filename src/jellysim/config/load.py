@@ -194,6 +194,18 @@ def _check_consistency(scene: Scene) -> None:
             f"tentacles.count * tentacles.particles = {t.count * t.particles} is too large: "
             "at most 5,000,000 simulated particles"
         )
+    if scene.bell.model != "none" and scene.root_motion.amplitude > 0.0:
+        raise InputError(
+            f"root_motion.amplitude = {_show(scene.root_motion.amplitude)} forces the roots, which "
+            f"only bell.model = 'none' does; with bell.model = {quote(scene.bell.model)} the bell "
+            "moves them: set root_motion.amplitude = 0"
+        )
+    bell = scene.bell
+    if bell.model == "kinematic" and bell.swim_speed > 0.0 and bell.contraction == 0.0:
+        raise InputError(
+            f"bell.swim_speed = {_show(bell.swim_speed)} needs a pulsing bell: the bell "
+            "swims by contracting, and bell.contraction = 0 holds it still"
+        )
 
 
 def parse_toml(text: str, source: str) -> Tree:

@@ -104,16 +104,53 @@ class Bell:
     model: str = param(
         "none",
         kind="choice",
-        choices=("none",),
-        doc="bell model driving the tentacle roots",
+        choices=("none", "kinematic"),
+        doc="bell model driving the tentacle roots: 'kinematic' (a rigid, animated bell) or "
+        "'none' (a still margin whose roots are forced by [root_motion])",
     )
     radius: float = param(0.15, unit="m", gt=0.0, le=1.0e3, doc="margin radius of the bell")
+    height: float = param(
+        0.1, unit="m", gt=0.0, le=1.0e3, doc="height of the bell from margin to apex, at rest"
+    )
+    thickness: float = param(
+        0.25, gt=0.0, lt=1.0, doc="thickness of the bell at the apex, as a fraction of its height"
+    )
+    lobes: int = param(
+        0, kind="int", ge=0, le=1000, doc="number of marginal lobes (0: a smooth round margin)"
+    )
+    lobe_depth: float = param(
+        0.05, ge=0.0, lt=0.5, doc="depth of the notches between lobes, a fraction of the radius"
+    )
     period: float = param(1.0, unit="s", ge=1.0e-3, le=1.0e4, doc="pulse period of the bell")
     contraction: float = param(
         0.0,
         ge=0.0,
         lt=1.0,
         doc="fraction of the margin radius lost at full contraction",
+    )
+    waveform: str = param(
+        "jet",
+        kind="choice",
+        choices=("jet", "sine"),
+        doc="contraction in time: 'jet' (fast contraction, slow relaxation) or 'sine'",
+    )
+    jet_fraction: float = param(
+        0.3, ge=0.05, le=0.95, doc="fraction of the period spent contracting ('jet' waveform)"
+    )
+    elongation: float = param(
+        0.5,
+        ge=0.0,
+        le=2.0,
+        doc="relative height gained per unit of contraction (bell turns taller)",
+    )
+    swim_speed: float = param(
+        0.0, unit="m/s", ge=0.0, le=100.0, doc="mean forward speed of the bell along its axis"
+    )
+    speed_variation: float = param(
+        0.8,
+        ge=0.0,
+        le=1.0,
+        doc="swimming speed swing with the pulse: the slowest speed is (1 - this) x swim_speed",
     )
 
 
@@ -124,7 +161,7 @@ class RootMotion:
         unit="m",
         ge=0.0,
         le=1.0e3,
-        doc="amplitude of the forced root oscillation (bell.model = none)",
+        doc="amplitude of the forced root oscillation (only with bell.model = none)",
     )
     frequency: float = param(
         1.0, unit="Hz", ge=0.0, le=1.0e3, doc="frequency of the root oscillation"

@@ -63,8 +63,14 @@ class ResultWriter:
         initial: dict[str, np.ndarray] | None = None,
         batch_frames: int = 32,
         batch_seconds: float = 1.0,
+        static: dict[str, tuple[np.ndarray, str]] | None = None,
+        links: dict[str, str] | None = None,
     ) -> None:
-        """Create the file (replacing one there), optionally starting with ``initial`` frames."""
+        """Create the file (replacing one there), optionally starting with ``initial`` frames.
+
+        ``static`` datasets (path: (array, units)) are written once; ``links`` (path: target)
+        name a per-frame dataset again (an HDF5 hard link: no second copy).
+        """
         self.path = path
         temporary = path.with_name(path.name + ".tmp")
         f = h5py.File(temporary, "w", libver="latest")
@@ -72,7 +78,8 @@ class ResultWriter:
             for spec in datasets:
                 data = None if initial is None else initial[spec.path]
                 rows = 0 if data is None else data.shape[0]
-                chunk_rows = max(1, min(64, 2**20 // max(1, 8 * int(np.prod(spec.frame_shape)))))
+                frame_bytes = np.dtype(spec.dtype).itemsize * int(np.prod(spec.frame_shape))
+                chunk_rows = max(1, min(64, 2**20 // max(1, frame_bytes)))
                 ds = f.create_dataset(
                     spec.path,
                     shape=(rows, *spec.frame_shape),
@@ -82,6 +89,11 @@ class ResultWriter:
                     data=data,
                 )
                 ds.attrs["units"] = spec.units
+            for name, (array, units) in (static or {}).items():
+                f.create_dataset(name, data=array)
+                f[name].attrs["units"] = units
+            for name, target in (links or {}).items():
+                f[name] = f[target]
             for key, value in attributes.items():
                 f.attrs[key] = value
             f.swmr_mode = True

@@ -185,11 +185,28 @@ class Simulation:
             "bell/rim": roots[0],
             "bell/rim_velocity": root_velocities[0],
             "bell/margin": self.driver.margin(self.time),
+            **self.driver.frame_values(self.time),
         }
 
     def datasets(self) -> list[Any]:
         t = self.scene.tentacles
-        return frame_datasets(t.count, t.particles, self.driver.margin(0.0).shape[0])
+        return [
+            *frame_datasets(t.count, t.particles, self.driver.margin(0.0).shape[0]),
+            *self.driver.frame_datasets(),
+        ]
+
+    def writer(
+        self, path: Path, scene_toml: str, initial: dict[str, np.ndarray] | None = None
+    ) -> ResultWriter:
+        """A result store for this simulation's datasets, the bell's included."""
+        return ResultWriter(
+            path,
+            self.datasets(),
+            self.attributes(scene_toml),
+            initial,
+            static=self.driver.static_datasets(),
+            links=self.driver.links(),
+        )
 
     def attributes(self, scene_toml: str) -> dict[str, Any]:
         from jellysim import __version__
@@ -263,7 +280,7 @@ def run(
         simulation.velocities[:] = state["velocities"]
         simulation.frame = frame
         kept = read_frames(result_path, datasets, frame + 1)
-        writer = ResultWriter(result_path, datasets, simulation.attributes(scene_toml), kept)
+        writer = simulation.writer(result_path, scene_toml, kept)
     else:
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -273,7 +290,7 @@ def run(
             raise InputError(f"--out {folder}: the folder is not writable")
         remove_checkpoint(folder)
         _write_text_atomic(folder / SCENE_FILE, scene_toml)
-        writer = ResultWriter(result_path, datasets, simulation.attributes(scene_toml))
+        writer = simulation.writer(result_path, scene_toml)
         writer.append(simulation.frame_values())
 
     log.info(

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jellysim.bell import make_root_driver
 from jellysim.config.schema import Scene
 from jellysim.errors import InputError
 from jellysim.tentacle.kernels import ChainModel, Medium, drag_gain
@@ -130,10 +131,7 @@ class SubstepPlan:
 
 def characteristic_speed(scene: Scene) -> float:
     """A speed scale (m/s) of the tentacles relative to the water."""
-    rm = scene.root_motion
-    return (
-        abs(scene.flow.speed) + 3.0 * scene.flow.noise + 2.0 * math.pi * rm.amplitude * rm.frequency
-    )
+    return abs(scene.flow.speed) + 3.0 * scene.flow.noise + make_root_driver(scene).forcing().speed
 
 
 def plan_substeps(scene: Scene) -> SubstepPlan:
@@ -142,7 +140,8 @@ def plan_substeps(scene: Scene) -> SubstepPlan:
     Bending and drag are integrated implicitly (unconditionally stable), so the limits are for
     accuracy: a tenth of the period over 2 pi of the chain's first cantilever mode
     ``omega_1 = (1.875 / L)^2 sqrt(EI_eff / (rho_t A))``; half the drag relaxation time
-    ``m / k(U)`` at the characteristic relative speed U; a hundredth of the root-motion period;
+    ``m / k(U)`` at the characteristic relative speed U; a hundredth of the root-motion period (of
+    the equivalent sine for a bell's pulse, :meth:`jellysim.bell.RootDriver.forcing`);
     a twentieth of the noise correlation time; the frame interval; and a Courant number of 2
     for the tension waves along the chain, ``dt <= 2 d / c`` with ``c = sqrt(T / (rho_t A))`` and
     T the tension that drag, buoyant weight and the root's acceleration can build up over the
@@ -162,14 +161,14 @@ def plan_substeps(scene: Scene) -> SubstepPlan:
     gain = drag_gain(
         max(characteristic_speed(scene), 1e-12), d, scene.water.density, scene.water.viscosity
     )
-    rm = scene.root_motion
+    forcing = make_root_driver(scene).forcing()
     speed = characteristic_speed(scene)
     volume = area * d
     gravity = math.sqrt(sum(g * g for g in scene.water.gravity))
     per_particle = (
         gain * speed
         + abs(scene.tentacle_density - scene.water.density) * volume * gravity
-        + mass * rm.amplitude * (2.0 * math.pi * rm.frequency) ** 2
+        + mass * forcing.acceleration
     )
     tension = (t.particles - 1) * per_particle
     wave_speed = math.sqrt(tension / (scene.tentacle_density * area))
@@ -180,8 +179,8 @@ def plan_substeps(scene: Scene) -> SubstepPlan:
     }
     if wave_speed > 0.0:
         limits["tension"] = TENSION_COURANT * d / wave_speed
-    if rm.amplitude > 0.0 and rm.frequency > 0.0:
-        limits["root motion"] = 0.01 / rm.frequency
+    if forcing.period > 0.0:
+        limits["root motion"] = 0.01 * forcing.period
     if scene.flow.noise > 0.0:
         limits["noise"] = scene.flow.noise_correlation_time / 20.0
     target = scene.solver.dt_safety * min(limits.values())
