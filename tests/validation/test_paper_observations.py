@@ -14,7 +14,9 @@ BASE = {"tentacles.count": 1, "flow.noise": 0.0, "duration": 10.0}
 def test_the_tip_oscillates_more_as_youngs_modulus_grows():
     # Fig. 7: "the higher the Young's modulus, the easier it is for the oscillation compelled at
     # the base to propagate to the tip".
-    traces = sweep("forced-tentacles", "tentacles.youngs_modulus", [1e2, 1e4, 2.4e5, 5e6, 9e9], BASE)
+    traces = sweep(
+        "forced-tentacles", "tentacles.youngs_modulus", [1e2, 1e4, 2.4e5, 5e6, 9e9], BASE
+    )
     ratios = [trace.tip_to_root_range() for trace in traces]
     assert all(a < b for a, b in zip(ratios, ratios[1:], strict=False)), ratios
     assert ratios[0] < 0.5 and abs(ratios[-1] - 1.0) < 0.05  # soft: damped; wood: rigid

@@ -1,0 +1,93 @@
+"""brown-jelly with its kinematic bell, end to end: result.h5's bell datasets (DESIGN §3) and
+tentacles that hang from, follow and stay out of the bell."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import jellysim
+from jellysim.bell import make_root_driver
+
+
+@pytest.fixture(scope="module")
+def brown(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
+    return jellysim.run(
+        "brown-jelly", tmp_path_factory.mktemp("brown"), overrides={"duration": 3.0}
+    )
+
+
+def test_bell_datasets_have_the_design_shapes_and_units(brown: jellysim.Result) -> None:
+    f = brown.file
+    frames = brown.frames
+    driver = make_root_driver(brown.scene)
+    vertices = f["bell/surface_vertices"]
+    assert vertices.shape == (frames, driver.surface(0.0).shape[0], 3)
+    assert f["bell/surface_faces"].shape == (driver.faces.shape[0], 3)
+    assert f["bell/surface_faces"].dtype.kind == "i"
+    assert int(f["bell/surface_faces"][:].max()) == vertices.shape[1] - 1
+    assert f["bell/position"].id == vertices.id  # the same data, stored once (a hard link)
+    assert f["bell/margin"].shape == (frames, driver.sectors, 3)
+    assert f["bell/centre"].shape == (frames, 3) and f["bell/contraction"].shape == (frames,)
+    for name in ("surface_vertices", "surface_faces", "margin", "centre", "contraction", "rim"):
+        assert "units" in f["bell"][name].attrs, name
+    assert f.attrs["bell_model"] == "kinematic"
+
+
+def test_stored_bell_is_the_bells_shape_at_each_frame(brown: jellysim.Result) -> None:
+    driver = make_root_driver(brown.scene)
+    time = brown.time
+    for frame in (0, 9, 31, len(time) - 1):
+        np.testing.assert_allclose(
+            brown.file["bell/surface_vertices"][frame], driver.surface(time[frame]), atol=1e-6
+        )
+        np.testing.assert_allclose(brown.margin[frame], driver.margin(time[frame]), atol=1e-15)
+    q, _, z, _ = driver.motion(time)
+    np.testing.assert_allclose(brown.file["bell/contraction"][:], q, atol=1e-15)
+    np.testing.assert_allclose(brown.file["bell/centre"][:, 2], z, atol=1e-15)
+
+
+def test_roots_ride_the_pulsing_swimming_margin(brown: jellysim.Result) -> None:
+    positions, rim = brown.tentacle_positions, brown.rim
+    np.testing.assert_allclose(positions[:, :, 0], rim, atol=1e-12)
+    # The bell swam its mean speed for the whole run (three whole cycles).
+    centre = brown.file["bell/centre"][:, 2]
+    assert centre[-1] - centre[0] == pytest.approx(0.3 * 3.0, rel=1e-9)
+    # The tentacles came along, trailing behind the margin.
+    tips = positions[:, :, -1, 2] - centre[:, None]
+    assert np.all(tips < -0.5)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [{}, {"flow.speed": 0.0, "bell.swim_speed": 0.0, "flow.noise": 0.0}],
+    ids=["preset", "still-water-no-flow"],
+)
+def test_tentacles_never_enter_the_bell(tmp_path: Path, overrides: dict) -> None:
+    # No contact model (the paper has none): this guards the regime of the presets, where the
+    # clamp and the trailing flow keep every particle below the margin.
+    result = jellysim.run("brown-jelly", tmp_path, overrides={"duration": 3.0, **overrides})
+    driver = make_root_driver(result.scene)
+    positions, time = result.tentacle_positions, result.time
+    inside = [driver.inside(positions[f, :, 1:], time[f]).sum() for f in range(len(time))]
+    assert sum(inside) == 0
+
+
+def test_a_bell_without_contraction_holds_still_and_its_tentacles_hang(tmp_path: Path) -> None:
+    overrides = {
+        "duration": 1.0,
+        "bell.contraction": 0.0,
+        "bell.swim_speed": 0.0,
+        "flow.speed": 0.0,
+        "flow.noise": 0.0,
+    }
+    result = jellysim.run("brown-jelly", tmp_path, overrides=overrides)
+    positions = result.tentacle_positions
+    np.testing.assert_allclose(
+        positions, np.broadcast_to(positions[:1], positions.shape), atol=1e-9
+    )
+    spacing = result.scene.tentacles.spacing
+    hanging = np.broadcast_to(-spacing * np.arange(positions.shape[2]), positions.shape[1:3])
+    np.testing.assert_allclose(positions[-1, :, :, 2], hanging, atol=1e-9)
+    vertices = result.file["bell/surface_vertices"][:]
+    np.testing.assert_array_equal(vertices, np.broadcast_to(vertices[:1], vertices.shape))
