@@ -3,11 +3,13 @@ tentacles that hang from, follow and stay out of the bell."""
 
 from pathlib import Path
 
+import matplotlib.image
 import numpy as np
 import pytest
 
 import jellysim
 from jellysim.bell import make_root_driver
+from jellysim.io.plots import jetting_and_relaxation, phase_frames
 
 
 @pytest.fixture(scope="module")
@@ -91,3 +93,14 @@ def test_a_bell_without_contraction_holds_still_and_its_tentacles_hang(tmp_path:
     np.testing.assert_allclose(positions[-1, :, :, 2], hanging, atol=1e-9)
     vertices = result.file["bell/surface_vertices"][:]
     np.testing.assert_array_equal(vertices, np.broadcast_to(vertices[:1], vertices.shape))
+
+
+def test_fig9_picks_full_contraction_and_late_relaxation(brown: jellysim.Result) -> None:
+    jetting, relaxing = phase_frames(brown)
+    contraction = brown.file["bell/contraction"][:]
+    assert contraction[jetting] == pytest.approx(brown.scene.bell.contraction, rel=0.01)
+    assert contraction[relaxing] < 0.01 * brown.scene.bell.contraction
+    assert brown.time[jetting] >= brown.time[-1] - brown.scene.bell.period - 1e-9  # last cycle
+    path = jetting_and_relaxation(brown, brown.folder / "fig9.png")
+    pixels = matplotlib.image.imread(path)
+    assert pixels.shape[0] > 400 and pixels[..., :3].std() > 0.05  # drawn, not blank

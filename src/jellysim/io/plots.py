@@ -55,8 +55,9 @@ def tentacle_shapes(result: Result, path: Path, snapshots: int = 6) -> Path:
         1, len(picks), figsize=(2.2 * len(picks), 4.4), dpi=120, sharex=True, sharey=True
     )
     for ax, frame in zip(np.atleast_1d(axes), picks, strict=True):
-        x = positions[frame]
-        ring = np.vstack([margin[frame], margin[frame][:1]])
+        centre = np.array([0.0, 0.0, margin[frame][:, 2].mean()])  # in the bell's frame
+        x = positions[frame] - centre
+        ring = np.vstack([margin[frame], margin[frame][:1]]) - centre
         ax.plot(ring[:, 0], ring[:, 2], color="0.5", lw=2)
         for chain in x:
             ax.plot(chain[:, 0], chain[:, 2], lw=1.2)
@@ -65,8 +66,81 @@ def tentacle_shapes(result: Result, path: Path, snapshots: int = 6) -> Path:
         ax.set_aspect("equal")
         ax.set_xlabel("x [m]")
         ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("z [m]")
-    fig.suptitle(f"{result.scene.name}: tentacle shapes (side view)", fontsize=10)
+    np.atleast_1d(axes)[0].set_ylabel("z - z(margin) [m]")
+    fig.suptitle(f"{result.scene.name}: tentacle shapes (side view, bell frame)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def _meridians(vertices: np.ndarray, sectors: int) -> list[np.ndarray]:
+    """The kinematic bell's cross-section in the x-z plane: the shell's outline at angles 0 and
+    pi (outer apex, outer rings down to the margin, inner rings back up, inner apex)."""
+    rings = (vertices.shape[0] - 2) // sectors
+    outlines = []
+    for sector in (0, sectors // 2):
+        ring_points = vertices[1 + np.arange(rings) * sectors + sector]
+        outlines.append(np.vstack([vertices[:1], ring_points, vertices[-1:]]))
+    return outlines
+
+
+def phase_frames(result: Result) -> tuple[int, int]:
+    """Frames of the last whole pulse at the end of jetting (full contraction) and late in the
+    relaxation (phase 0.95), for a kinematic bell."""
+    bell = result.scene.bell
+    time = result.time
+    period = bell.period
+    jet = bell.jet_fraction if bell.waveform == "jet" else 0.5
+    last = np.floor((time[-1] - 0.95 * period) / period) * period
+    if last < 0.0:
+        raise ValueError("the run is shorter than one pulse")
+    return (
+        int(np.argmin(np.abs(time - (last + jet * period)))),
+        int(np.argmin(np.abs(time - (last + 0.95 * period)))),
+    )
+
+
+def jetting_and_relaxation(result: Result, path: Path) -> Path:
+    """Paper Fig. 9: the jellyfish at the end of its jetting phase and late in its relaxation,
+    every drawn (interpolated) tentacle, in the bell's frame, side view."""
+    from jellysim.interpolation import interpolate_result
+
+    plt = _pyplot()
+    drawn = interpolate_result(result)
+    simulated = result.tentacle_positions
+    vertices = result.file["bell/surface_vertices"]
+    margin = result.file["bell/margin"]
+    centre = result.file["bell/centre"]
+    time = result.time
+    scene = result.scene
+    factor = drawn.shape[1] // simulated.shape[1]
+    fig, axes = plt.subplots(1, 2, figsize=(8.0, 5.2), dpi=120, sharex=True, sharey=True)
+    names = ("jetting phase (full contraction)", "relaxation phase")
+    for ax, frame, name in zip(axes, phase_frames(result), names, strict=True):
+        origin = centre[frame]
+        for k, chain in enumerate(drawn[frame] - origin):
+            ax.plot(
+                chain[:, 0],
+                chain[:, 2],
+                lw=0.9 if k % factor == 0 else 0.5,
+                color="tab:purple" if k % factor == 0 else "tab:orange",
+                alpha=0.9 if k % factor == 0 else 0.45,
+            )
+        for outline in _meridians(vertices[frame].astype(np.float64) - origin, margin.shape[1]):
+            ax.fill(outline[:, 0], outline[:, 2], color="tab:brown", alpha=0.6, lw=0)
+            ax.plot(outline[:, 0], outline[:, 2], color="tab:brown", lw=1.2)
+        ax.set_title(f"{name}, t = {time[frame]:.2f} s", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("z - z(bell) [m]")
+    t = scene.tentacles
+    fig.suptitle(
+        f"{scene.name}: E = {t.youngs_modulus:g} Pa, v = {scene.flow.speed:g} m/s, "
+        f"{simulated.shape[1]} simulated x {factor} drawn tentacles (cf. paper Fig. 9)",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -77,7 +151,10 @@ def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
     """Write every figure that applies to ``result`` into ``folder`` (default DIR/plots)."""
     folder = folder or result.folder / "plots"
     folder.mkdir(parents=True, exist_ok=True)
-    return [
+    paths = [
         root_tip_trace(result, folder / "root_tip_trace.png"),
         tentacle_shapes(result, folder / "tentacle_shapes.png"),
     ]
+    if "bell/surface_vertices" in result.file and result.time[-1] >= result.scene.bell.period:
+        paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
+    return paths
