@@ -35,6 +35,9 @@ MESH_RINGS = 12  # meridian rings of each surface, apex excluded
 MIN_SECTORS = 48  # vertices around the margin, at least
 SECTORS_PER_LOBE = 4
 Z_AXIS = np.array([0.0, 0.0, 1.0])
+# (q, dq/dt, z, u) at a set of times, each (S,): see KinematicBell.motion.
+Motion = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
 SMOOTHSTEP_PEAK_SLOPE = 1.875  # max of d/dx (6 x^5 - 15 x^4 + 10 x^3), at x = 1/2
 SMOOTHSTEP_PEAK_CURVATURE = 10.0 / math.sqrt(3.0)  # max |d2/dx2|, at x = 1/2 -+ sqrt(3)/6
 
@@ -154,24 +157,37 @@ class KinematicBell(RootDriver):
             [np.ones(MESH_RINGS), 1.0 - thickness * (1.0 - outer[-2::-1] ** 2)]
         )
         self._surface_cache: tuple[float, np.ndarray] = (math.nan, np.empty((0, 3)))
+        nothing = np.empty(0)
+        self._motion_cache: tuple[np.ndarray, Motion] = (
+            np.array([math.nan]),
+            (nothing, nothing, nothing, nothing),
+        )
 
     # The pulse and the swimming (Eq. B3-B5).
 
-    def motion(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def motion(self, times: np.ndarray) -> Motion:
         """At ``times`` (S,): the contraction ``q`` (fraction of the margin radius lost),
         ``dq/dt`` (1/s), the margin centre's position along the axis (m) and the swimming speed
-        (m/s). ``z = U t + U T k c`` integrates ``u = U (1 + k c')`` exactly (Eq. B5)."""
+        (m/s). ``z = U t + U T k c`` integrates ``u = U (1 + k c')`` exactly (Eq. B5).
+
+        The last answer is kept: a frame asks for the same times several times (roots, bell
+        velocity, surface)."""
         times = np.asarray(times, dtype=np.float64)
+        last_times, last = self._motion_cache
+        if times.shape == last_times.shape and np.array_equal(times, last_times):
+            return last
         c, slope = contraction_waveform(
             np.mod(times / self.period, 1.0), self.waveform, self.jet_fraction
         )
         u = self.swim_speed
-        return (
+        motion: Motion = (
             self.contraction * c,
             self.contraction * slope / self.period,
             u * (times + self.period * self.speed_gain * c),
             u * (1.0 + self.speed_gain * slope),
         )
+        self._motion_cache = (times.copy(), motion)
+        return motion
 
     def _notch(self, angles: np.ndarray) -> np.ndarray:
         """``w(theta) = (1 - cos(lobes theta)) / 2``: 0 at a lobe's tip, 1 in a notch (Eq. B2)."""
