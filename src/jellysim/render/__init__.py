@@ -1,0 +1,1 @@
+"""Rendering a result: POV-Ray scenes, a built-in preview renderer, and video."""

@@ -1,0 +1,87 @@
+"""What a renderer draws: one frame's geometry, the camera and the look, in world coordinates
+(SI units, z up, DESIGN §3). Renderers (POV-Ray, the built-in preview) take these and nothing
+else, so they cannot drift apart in what they show.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+RGB = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera: ``location`` and ``look_at`` (3,) m, ``up`` the world's up (+z), and
+    ``angle`` the horizontal field of view in degrees."""
+
+    location: np.ndarray
+    look_at: np.ndarray
+    angle: float = 40.0
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit vectors (right, true up, forward) of the image plane."""
+        forward = self.look_at - self.location
+        forward = forward / np.linalg.norm(forward)
+        right = np.cross(forward, self.up)
+        right = right / np.linalg.norm(right)
+        return right, np.cross(right, forward), forward
+
+
+@dataclass(frozen=True)
+class Look:
+    """Colours (linear RGB in [0, 1]) and materials of one jellyfish and its water."""
+
+    bell_color: RGB = (0.85, 0.55, 0.35)
+    tentacle_color: RGB = (0.80, 0.45, 0.30)
+    bell_transparency: float = 0.5  # 0 opaque, 1 invisible
+    glow: float = 0.3  # emission of the bell at final quality, 0 to 1
+    water_color: RGB = (0.05, 0.20, 0.35)
+    tentacle_radius: float = 0.004  # m at the root
+    tentacle_taper: float = 0.3  # tip radius / root radius
+
+
+@dataclass(frozen=True)
+class Jellyfish:
+    """One jellyfish in one frame.
+
+    ``bell_vertices`` (V, 3) m and ``bell_faces`` (M, 3) int (counter-clockwise seen from
+    outside), or both None for a result without a bell body; ``tentacles`` (N, P, 3) m, root
+    first (the drawn, interpolated tentacles).
+    """
+
+    tentacles: np.ndarray
+    bell_vertices: np.ndarray | None
+    bell_faces: np.ndarray | None
+    look: Look
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Everything in view at one time: jellyfish, and fluid particles (K, 3) m when a fluid was
+    simulated (``fluid_radius`` m each)."""
+
+    time: float
+    jellyfish: list[Jellyfish]
+    fluid: np.ndarray | None = None
+    fluid_radius: float = 0.0
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals (V, 3) at the vertices of a triangle mesh, area-weighted averages of the
+    normals of the faces around each vertex (outward for counter-clockwise faces)."""
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    face_normals = np.cross(b - a, c - a)  # length = twice the area: area weighting
+    normals = np.zeros_like(vertices, dtype=np.float64)
+    for corner in range(3):
+        np.add.at(normals, faces[:, corner], face_normals)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.where(length > 0.0, length, 1.0)
+
+
+def tentacle_radii(particles: int, look: Look) -> np.ndarray:
+    """Radius (m) at each particle of a drawn tentacle, (P,): linear taper from the root."""
+    return look.tentacle_radius * np.linspace(1.0, look.tentacle_taper, particles)
