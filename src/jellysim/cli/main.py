@@ -63,6 +63,47 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--out", default="out/sweeps", help="folder for the figure and the CSV")
     sweep.add_argument("--title", default="", help="figure title")
 
+    render = sub.add_parser("render", help="frames and a video of one or more results")
+    render.add_argument("dirs", nargs="+", metavar="DIR", help="folder(s) holding result.h5")
+    render.add_argument("--out", help="output folder (default: the first DIR/render)")
+    render.add_argument(
+        "--renderer",
+        choices=("auto", "povray", "preview"),
+        default="auto",
+        help="POV-Ray, or the built-in preview (auto: POV-Ray when installed)",
+    )
+    render.add_argument("--quality", choices=("draft", "final"), default="draft")
+    render.add_argument("--size", default="640x480", metavar="WxH", help="picture size in pixels")
+    render.add_argument(
+        "--camera",
+        choices=("auto", "fixed", "follow"),
+        default="auto",
+        help="frame the whole animation, or follow the swimmers (auto: follow when they travel)",
+    )
+    render.add_argument("--room", action="store_true", help="the paper's room with a water tank")
+    render.add_argument(
+        "--school", type=int, default=1, metavar="N", help="N jellyfish from the result(s)"
+    )
+    render.add_argument(
+        "--interpolation", type=int, metavar="N", help="drawn tentacles per simulated one"
+    )
+    render.add_argument("--fluid", choices=("spheres", "surface"), default="spheres")
+    render.add_argument("--seed", type=int, default=0, help="seed of the school's layout")
+    render.add_argument("--frames", metavar="A:B", help="render frames A to B-1 only")
+    render.add_argument("--gif", action="store_true", help="also write movie.gif")
+    render.add_argument("--no-video", action="store_true", help="frames only")
+    render.add_argument("--jobs", type=int, help="frames rendered at once (default: the cores)")
+    render.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="look.KEY=VALUE",
+        help="override a [look] key, e.g. look.bell_color=#ff9040 (repeatable)",
+    )
+    render.add_argument("--force", action="store_true", help="render every frame again")
+    render.add_argument("--quiet", action="store_true", help="no progress")
+
     sub.add_parser("presets", help="list the presets")
     show = sub.add_parser("show", help="print a preset's TOML")
     show.add_argument("name")
@@ -121,6 +162,70 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_size(text: str) -> tuple[int, int]:
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.isdigit() for p in parts):
+        raise InputError(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480")
+    width, height = int(parts[0]), int(parts[1])
+    if not (16 <= width <= 8192 and 16 <= height <= 8192):
+        raise InputError(f"--size {text}: each side must be 16 to 8192 pixels")
+    return width, height
+
+
+def _parse_frames(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    parts = text.split(":")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise InputError(f"--frames {text!r}: expected A:B, e.g. 0:24")
+    return int(parts[0]), int(parts[1])
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from jellysim.io.result import open_result
+    from jellysim.render.pipeline import render
+
+    size = _parse_size(args.size)
+    frames = _parse_frames(args.frames)
+    if args.school < 1 or args.school > 1000:
+        raise InputError(f"--school {args.school}: expected 1 to 1000 jellyfish")
+    if args.interpolation is not None and not 1 <= args.interpolation <= 1000:
+        raise InputError(f"--interpolation {args.interpolation}: expected 1 to 1000")
+    if args.jobs is not None and args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    results = [open_result(folder) for folder in args.dirs]
+    try:
+        out = Path(args.out) if args.out else results[0].folder / "render"
+        outputs = render(
+            results,
+            out,
+            renderer=args.renderer,
+            quality=args.quality,
+            size=size,
+            camera=args.camera,
+            room=args.room,
+            school=args.school,
+            interpolation=args.interpolation,
+            fluid=args.fluid,
+            seed=args.seed,
+            gif=args.gif,
+            video=not args.no_video,
+            jobs=args.jobs,
+            frames=frames,
+            look_overrides=args.overrides,
+            force=args.force,
+            quiet=args.quiet,
+        )
+    finally:
+        for result in results:
+            result.close()
+    print(f"{outputs['frames']} ({outputs['rendered']} rendered, {outputs['kept']} kept)")
+    for key in ("mp4", "gif"):
+        if key in outputs:
+            print(outputs[key])
+    return 0
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from jellysim.species import preset_names, preset_summary
 
@@ -148,6 +253,7 @@ COMMANDS = {
     "run": _cmd_run,
     "plot": _cmd_plot,
     "sweep": _cmd_sweep,
+    "render": _cmd_render,
     "presets": _cmd_presets,
     "show": _cmd_show,
 }

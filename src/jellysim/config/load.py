@@ -70,6 +70,8 @@ def allowed(meta: Mapping[str, Any]) -> str:
         return "a list of three finite numbers [x, y, z]"
     if kind == "direction":
         return "'radial' or a non-zero list of three finite numbers [x, y, z]"
+    if kind == "color":
+        return "[r, g, b] with each in [0, 1], or '#rrggbb'"
     if kind == "str":
         return "a name of letters, digits, '_', '.' and '-'"
     if kind == "bool":
@@ -108,6 +110,17 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
         if not isinstance(value, bool):
             raise bad()
         return value
+    if kind == "color":
+        if isinstance(value, str) and re.fullmatch(r"#[0-9A-Fa-f]{6}", value):
+            return tuple(int(value[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+        if (
+            not isinstance(value, (list, tuple))
+            or len(value) != 3
+            or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in value)
+            or not all(0.0 <= c <= 1.0 for c in value)
+        ):
+            raise bad()
+        return tuple(float(c) for c in value)
     if kind in ("vec3", "direction"):
         if kind == "direction" and value == "radial":
             return value

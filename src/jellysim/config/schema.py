@@ -174,6 +174,34 @@ class RootMotion:
 
 
 @dataclass(frozen=True)
+class Look:
+    bell_color: tuple[float, float, float] = param(
+        (0.9, 0.45, 0.15), kind="color", doc="colour of the bell (linear RGB)"
+    )
+    tentacle_color: tuple[float, float, float] = param(
+        (0.7, 0.25, 0.1), kind="color", doc="colour of the tentacles (linear RGB)"
+    )
+    bell_transparency: float = param(
+        0.5, ge=0.0, le=0.95, doc="how much light passes through the bell (0 opaque)"
+    )
+    glow: float = param(0.3, ge=0.0, le=1.0, doc="the bell's own glow at final quality")
+    water_color: tuple[float, float, float] = param(
+        (0.01, 0.06, 0.12), kind="color", doc="colour of the water (tint and depth fade)"
+    )
+    tentacle_radius: float | None = param(
+        None,
+        unit="m",
+        gt=0.0,
+        le=10.0,
+        nullable=True,
+        doc="drawn radius of a tentacle at its root (default: 0.25 x tentacles.spacing)",
+    )
+    tentacle_taper: float = param(
+        0.3, gt=0.0, le=1.0, doc="drawn radius at the tip as a fraction of the root's"
+    )
+
+
+@dataclass(frozen=True)
 class Solver:
     dt_safety: float = param(
         1.0,
@@ -199,6 +227,7 @@ class Scene:
     tentacles: Tentacles = field(default_factory=Tentacles)
     bell: Bell = field(default_factory=Bell)
     root_motion: RootMotion = field(default_factory=RootMotion)
+    look: Look = field(default_factory=Look)
     solver: Solver = field(default_factory=Solver)
 
     @property
@@ -216,5 +245,5 @@ class Scene:
 SECTIONS: dict[str, type] = {
     f.name: f.type if isinstance(f.type, type) else globals()[str(f.type)]
     for f in dataclasses.fields(Scene)
-    if f.name in ("water", "flow", "tentacles", "bell", "root_motion", "solver")
+    if f.name in ("water", "flow", "tentacles", "bell", "root_motion", "look", "solver")
 }

@@ -1,0 +1,411 @@
+"""``jellysim render``: frames of one or more results, then a video (docs/rendering.md).
+
+A render is a list of :class:`Member` jellyfish (a result, an offset, a phase shift and a look),
+a camera per frame (framing the whole animation, or following the swimmers' mean motion), and a
+renderer (POV-Ray or the built-in preview). Frames are written as ``frames/frame_NNNNN.png``
+under a temporary name and renamed when complete, so an interrupted render resumes where it
+stopped; ``render.json`` records the settings, and frames rendered with other settings are
+never mixed in.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jellysim.errors import InputError
+from jellysim.io.result import Result
+from jellysim.render.frame import Camera, Frame, Jellyfish, Look
+
+SETTINGS_FILE = "render.json"
+VIEW_DIRECTION = np.array([0.0, 1.0, -0.25])  # the camera looks along +y, a little down
+FIELD_OF_VIEW = 40.0  # degrees, horizontal
+SCHOOL_SPACING = 1.3  # neighbours in a school, in jellyfish sizes
+
+
+@dataclass(frozen=True)
+class Member:
+    """One jellyfish of the picture: a result, shifted by ``offset`` (3,) m, ``phase`` frames
+    later in its cycle (looping), drawn with ``look``."""
+
+    result: Result
+    offset: np.ndarray
+    phase: int
+    look: Look
+    tentacles: np.ndarray  # (F, N, P, 3) drawn (interpolated) tentacles, m
+    bell_vertices: Any  # h5py dataset (F, V, 3) or None
+    bell_faces: np.ndarray | None
+
+    def frame(self, index: int) -> Jellyfish:
+        count = self.tentacles.shape[0]
+        k = (index + self.phase) % count
+        vertices = None
+        if self.bell_vertices is not None:
+            vertices = np.asarray(self.bell_vertices[k], dtype=np.float64) + self.offset
+        return Jellyfish(self.tentacles[k] + self.offset, vertices, self.bell_faces, self.look)
+
+    def centres(self) -> np.ndarray:
+        """The bell's margin centre per frame (F, 3), shifted and phased as drawn."""
+        margin_centre = np.asarray(self.result.file["bell/margin"][:]).mean(axis=1)
+        k = (np.arange(margin_centre.shape[0]) + self.phase) % margin_centre.shape[0]
+        return margin_centre[k] + self.offset
+
+    def boxes(self) -> np.ndarray:
+        """Bounding box (F, 2, 3) of what is drawn, per frame."""
+        points = self.tentacles.reshape(self.tentacles.shape[0], -1, 3)
+        low, high = points.min(axis=1), points.max(axis=1)
+        if self.bell_vertices is not None:
+            vertices = np.asarray(self.bell_vertices[:], dtype=np.float64)
+            low = np.minimum(low, vertices.min(axis=1))
+            high = np.maximum(high, vertices.max(axis=1))
+        k = (np.arange(low.shape[0]) + self.phase) % low.shape[0]
+        return np.stack([low[k], high[k]], axis=1) + self.offset
+
+
+def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
+    """The look of a result's scene ([look] table, with ``look.KEY=VALUE`` overrides), the
+    drawn tentacle radius resolved."""
+    if overrides:
+        from jellysim.config import load_scene
+        from jellysim.config.load import parse_override
+
+        for item in overrides:
+            key = parse_override(item)[0]
+            if not key.startswith("look."):
+                raise InputError(
+                    f"--set {item}: render changes only [look] keys (look.*); "
+                    f"'{key}' needs a new simulation (jellysim run --set)"
+                )
+        scene = load_scene(scene, list(overrides))
+    look = scene.look
+    radius = look.tentacle_radius or 0.25 * scene.tentacles.spacing
+    return Look(
+        bell_color=look.bell_color,
+        tentacle_color=look.tentacle_color,
+        bell_transparency=look.bell_transparency,
+        glow=look.glow,
+        water_color=look.water_color,
+        tentacle_radius=radius,
+        tentacle_taper=look.tentacle_taper,
+    )
+
+
+def _shift_hue(color: tuple[float, float, float], turn: float) -> tuple[float, float, float]:
+    h, lightness, s = colorsys.rgb_to_hls(*color)
+    r, g, b = colorsys.hls_to_rgb((h + turn) % 1.0, lightness, s)
+    return (r, g, b)
+
+
+def make_members(
+    results: Sequence[Result],
+    school: int,
+    interpolation: int | None,
+    seed: int,
+    look_overrides: Sequence[str] = (),
+) -> list[Member]:
+    """The jellyfish to draw: every result once, or a school of ``school`` jellyfish cycling
+    through the results on a jittered grid with random phase shifts and hue shifts."""
+    from jellysim.interpolation import interpolate_result
+
+    drawn = [interpolate_result(r, interpolation) for r in results]
+    count = max(school, len(results))
+    rng = np.random.default_rng(seed)
+    size = max(
+        float(np.ptp(d.reshape(-1, 3), axis=0).max()) for d in drawn
+    )  # largest extent of one jellyfish
+    columns = math.ceil(math.sqrt(count))
+    members = []
+    for index in range(count):
+        which = index % len(results)
+        result = results[which]
+        look = scene_look(result.scene, look_overrides)
+        offset = np.zeros(3)
+        phase = 0
+        if count > 1:
+            row, column = divmod(index, columns)
+            jitter = rng.uniform(-0.25, 0.25, size=3)
+            offset = (
+                SCHOOL_SPACING
+                * size
+                * np.array(
+                    [column - (columns - 1) / 2 + jitter[0], row + jitter[1], 0.4 * jitter[2]]
+                )
+            )
+            phase = int(rng.integers(0, drawn[which].shape[0]))
+            if index >= len(results):
+                turn = 0.618034 * index % 1.0 * 0.25 - 0.125  # within an eighth of the wheel
+                look = replace(
+                    look,
+                    bell_color=_shift_hue(look.bell_color, turn),
+                    tentacle_color=_shift_hue(look.tentacle_color, turn),
+                )
+        has_bell = "bell/surface_vertices" in result.file
+        members.append(
+            Member(
+                result=result,
+                offset=offset,
+                phase=phase,
+                look=look,
+                tentacles=drawn[which],
+                bell_vertices=result.file["bell/surface_vertices"] if has_bell else None,
+                bell_faces=result.file["bell/surface_faces"][:] if has_bell else None,
+            )
+        )
+    return members
+
+
+def frame_cameras(
+    members: Sequence[Member], frames: int, size: tuple[int, int], mode: str
+) -> tuple[list[Camera], float, str]:
+    """A camera per frame, the framed extent (m) and the mode used.
+
+    ``fixed`` frames the union of every frame's bounding box; ``follow`` moves with the
+    least-squares straight line through the jellyfish's centres (so the pulses of a swimmer's
+    speed stay visible) and frames the largest box about it; ``auto`` follows when the centres
+    travel further than the jellyfish's size.
+    """
+    boxes = np.stack([m.boxes()[:frames] for m in members])  # (J, F, 2, 3)
+    low, high = boxes[:, :, 0].min(axis=0), boxes[:, :, 1].max(axis=0)  # (F, 3)
+    centres = np.mean([m.centres()[:frames] for m in members], axis=0)  # (F, 3)
+    size_m = float((high - low).max())
+    travel = float(np.linalg.norm(centres[-1] - centres[0]))
+    if mode == "auto":
+        mode = "follow" if travel > size_m else "fixed"
+    if mode == "follow":
+        t = np.arange(frames, dtype=np.float64)
+        slope, intercept = np.polyfit(t, centres, 1) if frames > 1 else (np.zeros(3), centres[0])
+        trend = intercept + t[:, None] * slope
+        rel_low, rel_high = (low - trend).min(axis=0), (high - trend).max(axis=0)
+        targets = trend + 0.5 * (rel_low + rel_high)
+        half = 0.5 * (rel_high - rel_low)
+    else:
+        overall_low, overall_high = low.min(axis=0), high.max(axis=0)
+        targets = np.broadcast_to(0.5 * (overall_low + overall_high), (frames, 3))
+        half = 0.5 * (overall_high - overall_low)
+    width, height = size
+    direction = VIEW_DIRECTION / np.linalg.norm(VIEW_DIRECTION)
+    probe = Camera(location=-direction, look_at=np.zeros(3), angle=FIELD_OF_VIEW)
+    right, up, forward = probe.basis()
+    tan_h = math.tan(math.radians(FIELD_OF_VIEW) / 2.0)
+    tan_v = tan_h * height / width
+    # The nearest distance at which every corner of the box projects inside the picture.
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    offsets = corners * half
+    needed = np.maximum(
+        np.abs(offsets @ right) / tan_h - offsets @ forward,
+        np.abs(offsets @ up) / tan_v - offsets @ forward,
+    )
+    distance = 1.08 * float(needed.max())
+    cameras = [
+        Camera(location=target - distance * forward, look_at=np.array(target), angle=FIELD_OF_VIEW)
+        for target in targets
+    ]
+    radius = float(np.linalg.norm(half))
+    return cameras, 2.0 * radius, mode
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """What decides how a frame looks; frames rendered with other settings are not reused."""
+
+    renderer: str
+    quality: str
+    size: tuple[int, int]
+    camera: str
+    room: bool
+    school: int
+    interpolation: int | None
+    fluid: str
+    seed: int
+    looks: tuple[str, ...]
+    results: tuple[str, ...]
+    scenes: tuple[str, ...]
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=1, sort_keys=True)
+
+
+def _check_settings(folder: Path, settings: RenderSettings, force: bool) -> None:
+    path = folder / SETTINGS_FILE
+    frames = folder / "frames"
+    if force or not path.is_file() or not any(frames.glob("frame_*.png")):
+        for stale in frames.glob("frame_*.png"):
+            stale.unlink()
+        return
+    if path.read_text(encoding="utf-8") != settings.to_json():
+        raise InputError(
+            f"{folder}: its frames were rendered with other settings ({SETTINGS_FILE}); "
+            "--force renders them again"
+        )
+
+
+def render(
+    results: Sequence[Result],
+    out: Path,
+    *,
+    renderer: str = "auto",
+    quality: str = "draft",
+    size: tuple[int, int] = (640, 480),
+    camera: str = "auto",
+    room: bool = False,
+    school: int = 1,
+    interpolation: int | None = None,
+    fluid: str = "spheres",
+    seed: int = 0,
+    gif: bool = False,
+    video: bool = True,
+    jobs: int | None = None,
+    frames: tuple[int, int] | None = None,
+    look_overrides: Sequence[str] = (),
+    force: bool = False,
+    quiet: bool = True,
+    notice: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Render ``results`` into ``out``: ``frames/``, ``pov/`` (POV-Ray scenes), ``movie.mp4``
+    and optionally ``movie.gif``. Returns paths and timings."""
+    from jellysim.render import povray
+
+    say = notice or (lambda text: print(text, file=sys.stderr))
+    povray_path = povray.find_povray()
+    if renderer == "povray" and povray_path is None:
+        raise InputError(
+            "--renderer povray: POV-Ray is not installed (Debian/Ubuntu: "
+            "sudo apt-get install povray); --renderer preview needs no system package"
+        )
+    if renderer == "auto":
+        renderer = "povray" if povray_path else "preview"
+        if povray_path is None:
+            say(
+                "notice: POV-Ray not found (sudo apt-get install povray); "
+                "using the built-in preview renderer"
+            )
+    if quality not in povray.QUALITIES:
+        raise InputError(f"--quality {quality}: expected one of draft, final")
+    for result in results:
+        scene_look(result.scene, look_overrides)  # bad --set fails before anything is written
+    frames_dir = out / "frames"
+    try:
+        frames_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"--out {out}: cannot create the folder ({err.strerror})") from None
+    if not os.access(out, os.W_OK) or not os.access(frames_dir, os.W_OK):
+        raise InputError(f"--out {out}: the folder is not writable")
+    frame_count = min(r.frames for r in results)
+    fps = float(results[0].file.attrs["fps"])
+    settings = RenderSettings(
+        renderer=renderer,
+        quality=quality,
+        size=size,
+        camera=camera,
+        room=room,
+        school=school,
+        interpolation=interpolation,
+        fluid=fluid,
+        seed=seed,
+        looks=tuple(look_overrides),
+        results=tuple(str(r.path.resolve()) for r in results),
+        scenes=tuple(r.scene_text for r in results),
+    )
+    _check_settings(out, settings, force)
+    (out / SETTINGS_FILE).write_text(settings.to_json(), encoding="utf-8")
+
+    members = make_members(results, school, interpolation, seed, look_overrides)
+    cameras, extent, camera_mode = frame_cameras(members, frame_count, size, camera)
+    room_box = None
+    if room:
+        boxes = np.concatenate([m.boxes()[:frame_count] for m in members])
+        room_box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+    first, stop = (0, frame_count) if frames is None else frames
+    if not 0 <= first < stop <= frame_count:
+        raise InputError(f"--frames {first}:{stop}: the result has frames 0:{frame_count}")
+    wanted = range(first, stop)
+    todo = [i for i in wanted if not (frames_dir / f"frame_{i:05d}.png").is_file()]
+    pov_dir = out / "pov"
+    if renderer == "povray":
+        pov_dir.mkdir(exist_ok=True)
+    level = povray.QUALITIES[quality]
+    cores = os.cpu_count() or 1
+    jobs = max(1, min(jobs or cores, max(1, len(todo))))
+
+    def frame_at(index: int) -> Frame:
+        return Frame(
+            time=float(index) / fps,
+            jellyfish=[m.frame(index) for m in members],
+        )
+
+    def one(index: int) -> None:
+        image = frames_dir / f"frame_{index:05d}.png"
+        if renderer == "povray":
+            assert povray_path is not None
+            scene_file = pov_dir / f"frame_{index:05d}.pov"
+            text = povray.scene_text(
+                frame_at(index), cameras[index], size, level, extent, room_box, fluid
+            )
+            scene_file.write_text(text, encoding="utf-8")
+            povray.render_file(povray_path, scene_file, image, size, level, max(1, cores // jobs))
+        else:
+            from jellysim.render.preview import render_preview
+
+            partial = image.with_name(image.stem + ".part.png")
+            render_preview(frame_at(index), cameras[index], size, partial, quality)
+            partial.replace(image)
+
+    start = time.perf_counter()
+    bar = _progress(len(wanted), len(wanted) - len(todo), quiet)
+    try:
+        with ThreadPoolExecutor(max_workers=jobs) as pool:
+            for _ in pool.map(one, todo):
+                bar.update(1)
+    finally:
+        bar.close()
+    wall = time.perf_counter() - start
+    outputs: dict[str, Any] = {
+        "frames": frames_dir,
+        "rendered": len(todo),
+        "kept": len(wanted) - len(todo),
+        "renderer": renderer,
+        "camera": camera_mode,
+        "seconds_per_frame": wall / len(todo) if todo else 0.0,
+    }
+    if video:
+        from jellysim.render.video import encode_gif, encode_mp4
+
+        pattern = frames_dir / "frame_%05d.png"
+        outputs["mp4"] = encode_mp4(pattern, fps, out / "movie.mp4")
+        if gif:
+            outputs["gif"] = encode_gif(pattern, fps, out / "movie.gif")
+    return outputs
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        return None
+
+    def close(self) -> None:
+        return None
+
+
+def _progress(total: int, done: int, quiet: bool) -> Any:
+    if quiet:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        initial=done,
+        unit="frame",
+        file=sys.stderr,
+        dynamic_ncols=True,
+        desc="rendering",
+    )
