@@ -23,7 +23,7 @@ from jellysim.errors import InputError
 from jellysim.species import preset_names
 
 REPO = Path(__file__).resolve().parents[2]
-KINDS = {"float", "int", "str", "choice", "vec3", "direction", "bool"}
+KINDS = {"float", "int", "str", "choice", "vec3", "direction", "bool", "color"}
 
 
 def _value_fields() -> list[tuple[str, dataclasses.Field[object]]]:
@@ -222,3 +222,22 @@ def test_scene_to_tree_omits_unset_keys_and_writes_lists() -> None:
     tree = scene_to_tree(Scene())
     assert "density" not in tree["tentacles"]
     assert tree["water"]["gravity"] == [0.0, 0.0, -9.81]
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        ("#ff8000", (1.0, 128 / 255, 0.0)),
+        ([0.1, 0.2, 0.3], (0.1, 0.2, 0.3)),
+        ([0, 1, 0], (0.0, 1.0, 0.0)),
+    ],
+)
+def test_colors_read_as_hex_or_rgb(value: object, expected: tuple[float, float, float]) -> None:
+    scene = load_scene("brown-jelly", {"look.bell_color": value})
+    assert scene.look.bell_color == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("value", ["#ff80", "orange", [0.1, 0.2], [0.1, 0.2, 1.5], [True, 0, 0]])
+def test_bad_colors_are_refused(value: object) -> None:
+    with pytest.raises(InputError, match="look.bell_color"):
+        load_scene("brown-jelly", {"look.bell_color": value})
