@@ -20,7 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from jellysim.render.frame import Camera, Frame, Jellyfish, tentacle_radii, vertex_normals
+from jellysim.render.frame import (
+    Camera,
+    Frame,
+    Jellyfish,
+    Look,
+    tentacle_radii,
+    vertex_normals,
+)
 
 INCLUDE_DIRS = (
     "/usr/share/povray-3.7/include",
@@ -193,10 +200,12 @@ def scene_text(
     extent: float,
     room: tuple[np.ndarray, np.ndarray] | None = None,
     fluid_style: str = "spheres",
+    water: Iterable[float] | None = None,
 ) -> str:
-    """The whole POV-Ray scene of one frame. ``extent`` (m) is the size of what is framed."""
-    look = frame.jellyfish[0].look if frame.jellyfish else None
-    water = look.water_color if look else (0.05, 0.2, 0.35)
+    """The whole POV-Ray scene of one frame. ``extent`` (m) is the size of what is framed;
+    ``water`` the water's colour (default: the first jellyfish's look)."""
+    if water is None:
+        water = frame.jellyfish[0].look.water_color if frame.jellyfish else Look().water_color
     parts = [
         "#version 3.7;\n",
         f"global_settings {{ assumed_gamma 1.0 max_trace_level {quality.trace_level} }}\n",
