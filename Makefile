@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-all lint docs clean venv
+.PHONY: demo test test-all lint docs clean venv povray
 
 # A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
 # lives in the python3-venv package: installed here when run as root, otherwise named.
@@ -23,20 +23,34 @@ $(BIN)/jellysim: pyproject.toml
 
 venv: $(BIN)/jellysim
 
-# The main job: simulate the brown-jelly preset and draw its figures.
-demo: $(BIN)/jellysim
+# POV-Ray renders the movies (Debian/Ubuntu package povray): installed here when run as root;
+# otherwise a note says what to run, and jellysim render falls back to its preview renderer.
+povray:
+	@command -v povray >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing POV-Ray: apt-get install povray"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get install -y -qq --no-install-recommends povray >/dev/null; \
+	  else \
+	    echo "note: POV-Ray is not installed; run 'sudo apt-get install povray' for POV-Ray renders"; \
+	  fi; }
+
+# The main job: simulate the brown-jelly preset, draw its figures and render its movie.
+demo: $(BIN)/jellysim povray
 	$(BIN)/jellysim run brown-jelly --out $(OUT)/brown-jelly --force
 	$(BIN)/jellysim plot $(OUT)/brown-jelly
+	$(BIN)/jellysim render $(OUT)/brown-jelly --force
 	@echo
 	@echo "Result:  $(OUT)/brown-jelly/result.h5 (resolved scene: $(OUT)/brown-jelly/scene.toml)"
 	@echo "Figures: $(OUT)/brown-jelly/plots/"
+	@echo "Movie:   $(OUT)/brown-jelly/render/movie.mp4"
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
-test: $(BIN)/jellysim
+test: $(BIN)/jellysim povray
 	$(BIN)/python -m pytest -q
 
 # Every test, slow ones included.
-test-all: $(BIN)/jellysim
+test-all: $(BIN)/jellysim povray
 	$(BIN)/python -m pytest -q --runslow
 
 lint: $(BIN)/jellysim

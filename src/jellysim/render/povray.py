@@ -49,7 +49,7 @@ class Quality:
 
 QUALITIES = {
     "draft": Quality("draft", None, False, False, 5),
-    "final": Quality("final", 0.1, True, True, 10),
+    "final": Quality("final", 0.3, True, True, 8),
 }
 
 
@@ -149,7 +149,7 @@ def tentacles_block(jelly: Jellyfish) -> str:
                 parts.append(f"sphere{{{points[i]},{radii[i]:.4g}}}")
     color = _rgb(jelly.look.tentacle_color)
     parts.append(
-        f"texture {{ pigment {{ rgbt <{color[1:-1]},0.15> }} "
+        f"texture {{ pigment {{ rgb {color} }} "
         "finish { ambient 0.15 diffuse 0.7 specular 0.2 } }"
     )
     parts.append("}")
