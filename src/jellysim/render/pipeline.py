@@ -43,9 +43,22 @@ class Member:
     offset: np.ndarray
     phase: int
     look: Look
-    tentacles: np.ndarray  # (F, N, P, 3) drawn (interpolated) tentacles, m
+    tentacles: np.ndarray  # (F, N, P, 3) drawn (interpolated) tentacles, m; N = 0 for none
     bell_vertices: Any  # h5py dataset (F, V, 3) or None
     bell_faces: np.ndarray | None
+    fluid: Any = None  # h5py dataset (F, K, D) of fluid particles, D = 2 or 3, or None
+    fluid_alive: Any = None  # h5py dataset (F, K) bool, or None
+
+    def fluid_points(self, index: int) -> np.ndarray | None:
+        """Fluid particles alive at the frame, (K', 3) m; a 2-D fluid (x, y up) drawn in the
+        x-z plane."""
+        if self.fluid is None:
+            return None
+        k = (index + self.phase) % self.fluid.shape[0]
+        points = np.asarray(self.fluid[k], dtype=np.float64)
+        if self.fluid_alive is not None:
+            points = points[np.asarray(self.fluid_alive[k], dtype=bool)]
+        return to_world(points) + self.offset
 
     def frame(self, index: int) -> Jellyfish:
         count = self.tentacles.shape[0]
@@ -56,21 +69,55 @@ class Member:
         return Jellyfish(self.tentacles[k] + self.offset, vertices, self.bell_faces, self.look)
 
     def centres(self) -> np.ndarray:
-        """The bell's margin centre per frame (F, 3), shifted and phased as drawn."""
+        """The bell's margin centre per frame (F, 3), shifted and phased as drawn (the centre
+        of the drawn box for a result without a bell)."""
+        if "bell/margin" not in self.result.file:
+            return self.boxes().mean(axis=1)
         margin_centre = np.asarray(self.result.file["bell/margin"][:]).mean(axis=1)
         k = (np.arange(margin_centre.shape[0]) + self.phase) % margin_centre.shape[0]
         return margin_centre[k] + self.offset
 
     def boxes(self) -> np.ndarray:
         """Bounding box (F, 2, 3) of what is drawn, per frame."""
-        points = self.tentacles.reshape(self.tentacles.shape[0], -1, 3)
-        low, high = points.min(axis=1), points.max(axis=1)
+        frames = self.result.frames
+        low = np.full((frames, 3), np.inf)
+        high = np.full((frames, 3), -np.inf)
+        if self.tentacles.shape[1] > 0:
+            points = self.tentacles.reshape(self.tentacles.shape[0], -1, 3)
+            low, high = points.min(axis=1), points.max(axis=1)
+        if self.fluid is not None:
+            for frame in range(frames):
+                points = to_world(np.asarray(self.fluid[frame], dtype=np.float64))
+                low[frame] = np.minimum(low[frame], points.min(axis=0))
+                high[frame] = np.maximum(high[frame], points.max(axis=0))
         if self.bell_vertices is not None:
             vertices = np.asarray(self.bell_vertices[:], dtype=np.float64)
             low = np.minimum(low, vertices.min(axis=1))
             high = np.maximum(high, vertices.max(axis=1))
         k = (np.arange(low.shape[0]) + self.phase) % low.shape[0]
         return np.stack([low[k], high[k]], axis=1) + self.offset
+
+
+def to_world(points: np.ndarray) -> np.ndarray:
+    """Particle positions (K, D) as 3-D world points: a 2-D fluid's (x, y up) becomes (x, 0, y)."""
+    if points.shape[-1] == 3:
+        return points
+    world = np.zeros((*points.shape[:-1], 3))
+    world[..., 0], world[..., 2] = points[..., 0], points[..., 1]
+    return world
+
+
+def fluid_radius(result: Result) -> float:
+    """Drawn radius (m) of a fluid particle: half the particle spacing (the result's
+    ``particle_spacing`` attribute, else the median nearest-neighbour distance at frame 0)."""
+    spacing = result.file.attrs.get("particle_spacing")
+    if spacing is None:
+        from scipy.spatial import cKDTree
+
+        points = to_world(np.asarray(result.file["fluid/position"][0], dtype=np.float64))
+        distances, _ = cKDTree(points).query(points, k=2)
+        spacing = float(np.median(distances[:, 1]))
+    return 0.5 * float(spacing)
 
 
 def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
@@ -118,12 +165,15 @@ def make_members(
     through the results on a jittered grid with random phase shifts and hue shifts."""
     from jellysim.interpolation import interpolate_result
 
-    drawn = [interpolate_result(r, interpolation) for r in results]
+    drawn = [
+        interpolate_result(r, interpolation)
+        if "tentacles/position" in r.file
+        else np.zeros((r.frames, 0, 1, 3))
+        for r in results
+    ]
     count = max(school, len(results))
     rng = np.random.default_rng(seed)
-    size = max(
-        float(np.ptp(d.reshape(-1, 3), axis=0).max()) for d in drawn
-    )  # largest extent of one jellyfish
+    size = max(_extent(r, d) for r, d in zip(results, drawn, strict=True))
     columns = math.ceil(math.sqrt(count))
     members = []
     for index in range(count):
@@ -151,6 +201,7 @@ def make_members(
                     tentacle_color=_shift_hue(look.tentacle_color, turn),
                 )
         has_bell = "bell/surface_vertices" in result.file
+        has_fluid = "fluid/position" in result.file
         members.append(
             Member(
                 result=result,
@@ -160,9 +211,22 @@ def make_members(
                 tentacles=drawn[which],
                 bell_vertices=result.file["bell/surface_vertices"] if has_bell else None,
                 bell_faces=result.file["bell/surface_faces"][:] if has_bell else None,
+                fluid=result.file["fluid/position"] if has_fluid else None,
+                fluid_alive=result.file["fluid/alive"] if "fluid/alive" in result.file else None,
             )
         )
     return members
+
+
+def _extent(result: Result, drawn: np.ndarray) -> float:
+    """The largest extent (m) of one jellyfish (or fluid) over its frames."""
+    points = [drawn.reshape(-1, 3)]
+    if "fluid/position" in result.file:
+        points.append(to_world(np.asarray(result.file["fluid/position"][0], dtype=np.float64)))
+    if "bell/surface_vertices" in result.file:
+        points.append(np.asarray(result.file["bell/surface_vertices"][0], dtype=np.float64))
+    stacked = np.concatenate(points)
+    return float(np.ptp(stacked, axis=0).max()) if stacked.size else 1.0
 
 
 def frame_cameras(
@@ -338,10 +402,16 @@ def render(
     cores = os.cpu_count() or 1
     jobs = max(1, min(jobs or cores, max(1, len(todo))))
 
+    fluids = [m for m in members if m.fluid is not None]
+    particle_radius = fluid_radius(fluids[0].result) if fluids else 0.0
+
     def frame_at(index: int) -> Frame:
+        points = [p for m in fluids if (p := m.fluid_points(index)) is not None]
         return Frame(
             time=float(index) / fps,
             jellyfish=[m.frame(index) for m in members],
+            fluid=np.concatenate(points) if points else None,
+            fluid_radius=particle_radius,
         )
 
     def one(index: int) -> None:
@@ -381,10 +451,10 @@ def render(
     if video:
         from jellysim.render.video import encode_gif, encode_mp4
 
-        pattern = frames_dir / "frame_%05d.png"
-        outputs["mp4"] = encode_mp4(pattern, fps, out / "movie.mp4")
+        files = [frames_dir / f"frame_{i:05d}.png" for i in wanted]
+        outputs["mp4"] = encode_mp4(files, fps, out / "movie.mp4")
         if gif:
-            outputs["gif"] = encode_gif(pattern, fps, out / "movie.gif")
+            outputs["gif"] = encode_gif(files, out / "movie.gif", fps)
     return outputs
 
 

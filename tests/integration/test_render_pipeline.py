@@ -1,0 +1,89 @@
+"""``jellysim render`` end to end: the movie (frame count, size, duration), the preview renderer
+without POV-Ray, and results without tentacles (fluid only)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import matplotlib.image
+import numpy as np
+import pytest
+
+import jellysim
+from jellysim.render import povray
+from jellysim.render.pipeline import make_members, render
+from jellysim.render.video import probe
+
+
+@pytest.fixture(scope="module")
+def brown(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
+    folder = tmp_path_factory.mktemp("brown")
+    return jellysim.run("brown-jelly", folder, overrides={"duration": 0.5, "fps": 12.0})
+
+
+def test_preview_renders_a_movie_without_povray_on_the_path(
+    brown: jellysim.Result, tmp_path: Path
+) -> None:
+    out = tmp_path / "movie"
+    env = {**os.environ, "PATH": str(Path(sys.executable).parent)}  # no povray, no ffmpeg
+    done = subprocess.run(
+        [sys.executable, "-m", "jellysim", "render", str(brown.folder), "--out", str(out)]
+        + ["--size", "96x72", "--gif", "--quiet"],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "preview renderer" in done.stderr  # the notice
+    info = probe(out / "movie.mp4")
+    assert info["frames"] == brown.frames == 7
+    assert (info["width"], info["height"]) == (96, 72)
+    assert info["duration"] == pytest.approx(brown.frames / 12.0, abs=0.02)
+    assert info["codec"] == "h264" and info["pix_fmt"] == "yuv420p"
+    assert (out / "movie.gif").stat().st_size > 0
+    picture = matplotlib.image.imread(out / "frames" / "frame_00003.png")[..., :3]
+    assert picture.shape == (72, 96, 3) and picture.std() > 0.02  # not blank
+    assert str(out / "movie.mp4") in done.stdout
+
+
+def _fluid_result(folder: Path, dead: int) -> Path:
+    """A hand-made fluid-only result (the layout of DESIGN §3): a 2-D block of particles
+    falling, ``dead`` of them marked as left the domain."""
+    folder.mkdir()
+    frames, side = 4, 10
+    x, y = np.meshgrid(np.arange(side) * 0.01, np.arange(side) * 0.01)
+    block = np.stack([x.ravel(), y.ravel()], axis=1)
+    positions = np.stack([block - [0.0, 0.002 * f] for f in range(frames)])
+    alive = np.ones((frames, side * side), dtype=bool)
+    alive[:, :dead] = False
+    with h5py.File(folder / "result.h5", "w") as f:
+        f["time"] = np.arange(frames) / 10.0
+        f["fluid/position"] = positions
+        f["fluid/alive"] = alive
+        f.attrs["scene"] = 'name = "block"\nfps = 10.0\nduration = 0.3\n'
+        f.attrs["fps"] = 10.0
+        f.attrs["frames_expected"] = frames
+    return folder
+
+
+@pytest.mark.parametrize("renderer", ["preview", "povray"])
+def test_fluid_only_results_render_their_live_particles(tmp_path: Path, renderer: str) -> None:
+    if renderer == "povray" and povray.find_povray() is None and not os.environ.get("CI"):
+        pytest.skip("POV-Ray is not installed")
+    with jellysim.open_result(_fluid_result(tmp_path / "fluid", dead=7)) as result:
+        members = make_members([result], 1, None, 0)
+        assert members[0].tentacles.shape[1] == 0
+        points = members[0].fluid_points(2)
+        assert points.shape == (93, 3) and np.all(points[:, 1] == 0.0)  # (x, y) -> (x, 0, y)
+        done = render([result], tmp_path / "r", renderer=renderer, size=(48, 48), video=False)
+    assert done["rendered"] == 4
+    picture = matplotlib.image.imread(tmp_path / "r" / "frames" / "frame_00000.png")[..., :3]
+    assert picture.std() > 0.02
+    if renderer == "povray":
+        text = (tmp_path / "r" / "pov" / "frame_00000.pov").read_text()
+        assert text.count("sphere{") == 93  # the live particles only
