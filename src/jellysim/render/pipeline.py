@@ -48,6 +48,10 @@ class Member:
     bell_faces: np.ndarray | None
     fluid: Any = None  # h5py dataset (F, K, D) of fluid particles, D = 2 or 3, or None
     fluid_alive: Any = None  # h5py dataset (F, K) bool, or None
+    shift: np.ndarray | None = None  # (F, 3) m added per frame: undoes the phase's swim travel
+
+    def _move(self, index: int) -> np.ndarray:
+        return self.offset if self.shift is None else self.offset + self.shift[index]
 
     def fluid_points(self, index: int) -> np.ndarray | None:
         """Fluid particles alive at the frame, (K', 3) m; a 2-D fluid (x, y up) drawn in the
@@ -58,15 +62,16 @@ class Member:
         points = np.asarray(self.fluid[k], dtype=np.float64)
         if self.fluid_alive is not None:
             points = points[np.asarray(self.fluid_alive[k], dtype=bool)]
-        return to_world(points) + self.offset
+        return to_world(points) + self._move(index)
 
     def frame(self, index: int) -> Jellyfish:
         count = self.tentacles.shape[0]
         k = (index + self.phase) % count
+        move = self._move(index)
         vertices = None
         if self.bell_vertices is not None:
-            vertices = np.asarray(self.bell_vertices[k], dtype=np.float64) + self.offset
-        return Jellyfish(self.tentacles[k] + self.offset, vertices, self.bell_faces, self.look)
+            vertices = np.asarray(self.bell_vertices[k], dtype=np.float64) + move
+        return Jellyfish(self.tentacles[k] + move, vertices, self.bell_faces, self.look)
 
     def centres(self) -> np.ndarray:
         """The bell's margin centre per frame (F, 3), shifted and phased as drawn (the centre
@@ -75,7 +80,8 @@ class Member:
             return self.boxes().mean(axis=1)
         margin_centre = np.asarray(self.result.file["bell/margin"][:]).mean(axis=1)
         k = (np.arange(margin_centre.shape[0]) + self.phase) % margin_centre.shape[0]
-        return margin_centre[k] + self.offset
+        shift = 0.0 if self.shift is None else self.shift
+        return margin_centre[k] + self.offset + shift
 
     def boxes(self) -> np.ndarray:
         """Bounding box (F, 2, 3) of what is drawn, per frame."""
@@ -95,7 +101,8 @@ class Member:
             low = np.minimum(low, vertices.min(axis=1))
             high = np.maximum(high, vertices.max(axis=1))
         k = (np.arange(low.shape[0]) + self.phase) % low.shape[0]
-        return np.stack([low[k], high[k]], axis=1) + self.offset
+        shift = 0.0 if self.shift is None else self.shift[:, None]
+        return np.stack([low[k], high[k]], axis=1) + self.offset + shift
 
 
 def to_world(points: np.ndarray) -> np.ndarray:
@@ -202,6 +209,7 @@ def make_members(
                 )
         has_bell = "bell/surface_vertices" in result.file
         has_fluid = "fluid/position" in result.file
+        shift = _phase_shift(result, phase) if phase else None
         members.append(
             Member(
                 result=result,
@@ -213,20 +221,40 @@ def make_members(
                 bell_faces=result.file["bell/surface_faces"][:] if has_bell else None,
                 fluid=result.file["fluid/position"] if has_fluid else None,
                 fluid_alive=result.file["fluid/alive"] if "fluid/alive" in result.file else None,
+                shift=shift,
             )
         )
     return members
 
 
+def _phase_shift(result: Result, phase: int) -> np.ndarray | None:
+    """(F, 3) m: what brings a swimmer shown ``phase`` frames later back onto the straight line
+    of its mean swim at each frame, so that a phase shift shifts the pulse, not the place."""
+    if "bell/margin" not in result.file:
+        return None
+    centres = np.asarray(result.file["bell/margin"][:]).mean(axis=1)
+    frames = centres.shape[0]
+    t = np.arange(frames, dtype=np.float64)
+    if frames < 2:
+        return None
+    slope, intercept = np.polyfit(t, centres, 1)
+    trend = intercept + t[:, None] * slope
+    return trend - trend[(np.arange(frames) + phase) % frames]
+
+
 def _extent(result: Result, drawn: np.ndarray) -> float:
-    """The largest extent (m) of one jellyfish (or fluid) over its frames."""
-    points = [drawn.reshape(-1, 3)]
+    """The largest extent (m) of one jellyfish (or its fluid) in any one frame: its size, not
+    how far it swims."""
+    frames = result.frames
+    parts = [drawn.reshape(frames, -1, 3)]
     if "fluid/position" in result.file:
-        points.append(to_world(np.asarray(result.file["fluid/position"][0], dtype=np.float64)))
+        parts.append(to_world(np.asarray(result.file["fluid/position"][:], dtype=np.float64)))
     if "bell/surface_vertices" in result.file:
-        points.append(np.asarray(result.file["bell/surface_vertices"][0], dtype=np.float64))
-    stacked = np.concatenate(points)
-    return float(np.ptp(stacked, axis=0).max()) if stacked.size else 1.0
+        parts.append(np.asarray(result.file["bell/surface_vertices"][:], dtype=np.float64))
+    points = np.concatenate(parts, axis=1)
+    if points.shape[1] == 0:
+        return 1.0
+    return float(np.ptp(points, axis=1).max())
 
 
 def frame_cameras(
@@ -277,6 +305,17 @@ def frame_cameras(
     ]
     radius = float(np.linalg.norm(half))
     return cameras, 2.0 * radius, mode
+
+
+def outside(camera: Camera, box: tuple[np.ndarray, np.ndarray]) -> Camera:
+    """The camera moved back along its view, if need be, to stand in front of the box (the
+    tank): a tenth of the box's depth before its front face."""
+    _, _, forward = camera.basis()
+    front = box[0][1] - 0.1 * (box[1][1] - box[0][1])
+    if camera.location[1] <= front or forward[1] <= 0.0:
+        return camera
+    back = (camera.location[1] - front) / forward[1]
+    return replace(camera, location=camera.location - back * forward)
 
 
 @dataclass(frozen=True)
@@ -389,7 +428,8 @@ def render(
     room_box = None
     if room:
         boxes = np.concatenate([m.boxes()[:frame_count] for m in members])
-        room_box = (boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+        room_box = povray.room_box(boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
+        cameras = [outside(c, room_box) for c in cameras]
     first, stop = (0, frame_count) if frames is None else frames
     if not 0 <= first < stop <= frame_count:
         raise InputError(f"--frames {first}:{stop}: the result has frames 0:{frame_count}")

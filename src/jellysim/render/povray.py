@@ -169,26 +169,33 @@ def fluid_block(frame: Frame, style: str) -> str:
     return f"union {{ {body} {color} }}\n"
 
 
-def room_block(low: np.ndarray, high: np.ndarray, water: Iterable[float]) -> str:
-    """The paper's Fig. 12 set: a glass tank of water on a tiled floor in a room.
-
-    ``low`` and ``high`` (3,) bound what swims in the tank (world coordinates, m)."""
+def room_box(low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The tank's inner corners around what swims in it (``low``, ``high`` (3,) m): a margin of
+    a fifth of the horizontal size at the sides, a tenth above and below."""
     size = high - low
-    margin = 0.25 * size.max()
-    tank_low, tank_high = low - margin, high + margin
-    floor = tank_low[2] - 0.02 * size.max()
-    span = 20.0 * size.max()
-    tile = max(size.max() / 4.0, 1e-3)
-    color = _rgb(water)
+    side = 0.2 * max(size[0], size[1])
+    margin = np.array([side, side, 0.1 * size[2] + side / 2])
+    return low - margin, high + margin
+
+
+def room_block(tank_low: np.ndarray, tank_high: np.ndarray, water: Iterable[float]) -> str:
+    """The paper's Fig. 12 set: a glass tank of water (corners ``tank_low``, ``tank_high``, m)
+    on a tiled floor in front of a wall."""
+    size = tank_high - tank_low
+    scale = float(size.max())
+    glass = 0.005 * scale
+    floor = tank_low[2] - glass
+    tile = max(float(max(size[0], size[1])) / 4.0, 1e-3)
+    # Water tints what is seen through it: a light filter towards the water's hue.
+    hue = np.asarray(tuple(water), dtype=np.float64)
+    tint = 0.7 + 0.3 * hue / max(float(hue.max()), 1e-9)
     return (
-        f"plane {{ y, {floor:.6g} pigment {{ checker rgb 0.75 rgb 0.55 scale {tile:.4g} }} "
+        f"plane {{ y, {floor:.6g} pigment {{ checker rgb 0.75 rgb 0.5 scale {tile:.4g} }} "
         "finish { diffuse 0.8 } }\n"
-        f"plane {{ z, {tank_high[1] + span / 4:.6g} pigment {{ rgb <0.85,0.83,0.78> }} }}\n"
-        f"box {{ {vec(tank_low)}, {vec(tank_high)} hollow "
-        "texture { pigment { rgbf <0.9,0.97,1.0,0.95> } finish { specular 0.6 reflection 0.05 } } "
-        "interior { ior 1.0 } }\n"
-        f"box {{ {vec(tank_low + 0.01 * size.max())}, {vec(tank_high - 0.01 * size.max())} hollow "
-        f"texture {{ pigment {{ rgbf <{color[1:-1]},0.92> }} }} interior {{ ior 1.0 }} }}\n"
+        f"plane {{ z, {tank_high[1] + 2.0 * scale:.6g} pigment {{ rgb <0.85,0.83,0.78> }} }}\n"
+        f"box {{ {vec(tank_low - glass)}, {vec(tank_high + glass)} hollow "
+        f"texture {{ pigment {{ rgbf <{tint[0]:.3g},{tint[1]:.3g},{tint[2]:.3g},0.92> }} "
+        "finish { specular 0.6 roughness 0.01 reflection 0.04 } } interior { ior 1.0 } }\n"
     )
 
 
