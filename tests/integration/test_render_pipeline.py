@@ -87,3 +87,14 @@ def test_fluid_only_results_render_their_live_particles(tmp_path: Path, renderer
     if renderer == "povray":
         text = (tmp_path / "r" / "pov" / "frame_00000.pov").read_text()
         assert text.count("sphere{") == 93  # the live particles only
+
+
+def test_a_phase_shift_shifts_the_pulse_not_the_place(brown: jellysim.Result) -> None:
+    members = make_members([brown], 4, None, 3)
+    assert len({m.phase for m in members}) > 1
+    first = members[0].centres() - members[0].offset
+    for member in members[1:]:
+        centres = member.centres() - member.offset
+        # Same mean swim: the heights differ only by the pulse's wobble about the mean line
+        # (brown-jelly swims 0.3 m/s; a shifted pulse moves it by at most 0.1 m).
+        assert np.abs(centres[:, 2] - first[:, 2]).max() < 0.1
