@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from jellysim.tentacle.kernels import (
+    KKT_HALF_BANDWIDTH,
     Medium,
     _band_ldlt_solve,
     advance_frame,
@@ -107,10 +108,11 @@ def test_lumped_masses():
     assert free.mass.sum() == pytest.approx(9 * segment, rel=1e-14)
 
 
-def test_banded_ldlt_solve_equals_dense_solve_on_a_saddle_point_system():
-    # SPD block over 3 unknowns per particle, one multiplier after each particle (as assembled).
+@pytest.mark.parametrize(("n", "b"), [(24, 10), (48, KKT_HALF_BANDWIDTH)])
+def test_banded_ldlt_solve_equals_dense_solve_on_a_saddle_point_system(n, b):
+    # SPD block over 3 unknowns per particle, one multiplier after each particle (as assembled);
+    # the assembled half-bandwidth takes the unrolled path for its interior columns.
     rng = np.random.default_rng(1)
-    n, b = 24, 10
     a = np.zeros((n, n))
     for i in range(n):
         for j in range(max(0, i - b), i + 1):

