@@ -157,6 +157,16 @@ class KinematicBell(RootDriver):
             [np.ones(MESH_RINGS), 1.0 - thickness * (1.0 - outer[-2::-1] ** 2)]
         )
         self._surface_cache: tuple[float, np.ndarray] = (math.nan, np.empty((0, 3)))
+        # Per root, constant: radial unit vector (T, 3), rest margin radius (T,), notch depth
+        # (T,) and the rest angle psi0 of the wall at the margin (T,) (Eq. B2, B6).
+        angles = self.root_angles
+        depth = self.lobe_depth * self._notch(angles)
+        self._root_constants = (
+            np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1),
+            radius * self._lobe_factor(1.0, angles),
+            depth,
+            np.arctan2(-4.0 * radius * depth, 0.5 * np.pi * height),
+        )
         nothing = np.empty(0)
         self._motion_cache: tuple[np.ndarray, Motion] = (
             np.array([math.nan]),
@@ -201,23 +211,16 @@ class KinematicBell(RootDriver):
 
     def roots(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q, q_rate, z, u = self.motion(times)
-        lobe = self._lobe_factor(1.0, self.root_angles)  # (T,)
-        radial = np.stack(
-            [np.cos(self.root_angles), np.sin(self.root_angles), np.zeros_like(self.root_angles)],
-            axis=1,
-        )
-        rest_radius = self.radius * lobe
+        radial, rest_radius, depth, rest = self._root_constants
         positions = (rest_radius[None, :, None] * (1.0 - q)[:, None, None]) * radial[None]
         positions[..., 2] = z[:, None]
         velocities = -(rest_radius[None, :, None] * q_rate[:, None, None]) * radial[None]
         velocities[..., 2] = u[:, None]
         # Clamp direction (Eq. B6): the wall's meridian tangent at the margin turns by
         # psi - psi0, and the root direction (-z at rest) turns with it.
-        depth = self.lobe_depth * self._notch(self.root_angles)  # (T,)
         q2 = q[:, None]
         d_rho = -self.radius * (2.0 * q2 * (1.0 - depth) + 4.0 * depth * (1.0 - q2))
         d_z = 0.5 * np.pi * self.height * (1.0 + self.elongation * q2)
-        rest = np.arctan2(-4.0 * self.radius * depth, 0.5 * np.pi * self.height)
         turn = np.arctan2(d_rho, d_z) - rest
         directions = np.sin(turn)[..., None] * radial[None] - np.cos(turn)[..., None] * Z_AXIS
         return positions, velocities, directions

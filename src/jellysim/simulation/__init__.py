@@ -78,6 +78,7 @@ class Simulation:
         """Frame 0: every tentacle straight from its root along its clamp direction, moving
         rigidly with its root (no impulsive start)."""
         roots, root_velocities, directions = self.driver.roots(np.zeros(1))
+        self._rim = (0, roots[0], root_velocities[0])  # (frame, rim, rim velocity)
         offsets = np.arange(self.scene.tentacles.particles) * self.scene.tentacles.spacing
         self.positions[:] = (
             roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
@@ -135,6 +136,7 @@ class Simulation:
             self.diagnostics,
         )
         self.frame += 1
+        self._rim = (self.frame, roots[-1], root_velocities[-1])  # what drove the roots last
         for observer in self.observers:
             observer(self)
         self._watchdog(times)
@@ -174,16 +176,18 @@ class Simulation:
 
     def frame_values(self) -> dict[str, Any]:
         """The current frame as the result store's datasets."""
-        t = np.array([self.time])
-        roots, root_velocities, _ = self.driver.roots(t)
+        frame, rim, rim_velocity = self._rim
+        if frame != self.frame:  # the state was set from outside (a resume, a script)
+            roots, root_velocities, _ = self.driver.roots(np.array([self.time]))
+            rim, rim_velocity = roots[0], root_velocities[0]
         return {
             "time": self.time,
             "tentacles/position": self.positions,
             "tentacles/velocity": self.velocities,
             "tentacles/constraint_error": float(self.diagnostics[:, 0].max(initial=0.0)),
             "tentacles/projection_iterations": int(self.diagnostics[:, 1].max(initial=0.0)),
-            "bell/rim": roots[0],
-            "bell/rim_velocity": root_velocities[0],
+            "bell/rim": rim,
+            "bell/rim_velocity": rim_velocity,
             "bell/margin": self.driver.margin(self.time),
             **self.driver.frame_values(self.time),
         }
