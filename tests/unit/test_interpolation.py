@@ -89,7 +89,7 @@ def test_symmetric_tentacles_interpolate_to_rotated_copies(brown):
 def test_no_banding_around_the_rim(brown):
     # DESIGN §2: cosine weights bunch drawn tentacles near the simulated ones. The RMS tip
     # distance (in the roots' local frames) between neighbouring drawn tentacles must vary by
-    # less than 2x around the rim; without the lag it varies by about 10x.
+    # less than 2x around the rim; without the lag it varies by about 20x.
     def spread(drawn):
         roots = drawn[:, :, 0]
         centre = brown.margin.mean(axis=1)
