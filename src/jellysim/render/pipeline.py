@@ -26,6 +26,7 @@ import numpy as np
 
 from jellysim.errors import InputError
 from jellysim.io.result import Result
+from jellysim.progress import progress
 from jellysim.render.frame import Camera, Frame, Jellyfish, Look
 
 SETTINGS_FILE = "render.json"
@@ -472,13 +473,12 @@ def render(
             partial.replace(image)
 
     start = time.perf_counter()
-    bar = _progress(len(wanted), len(wanted) - len(todo), quiet)
-    try:
-        with ThreadPoolExecutor(max_workers=jobs) as pool:
-            for _ in pool.map(one, todo):
-                bar.update(1)
-    finally:
-        bar.close()
+    with (
+        progress(len(wanted), len(wanted) - len(todo), quiet, "rendering") as bar,
+        ThreadPoolExecutor(max_workers=jobs) as pool,
+    ):
+        for _ in pool.map(one, todo):
+            bar.update(1)
     wall = time.perf_counter() - start
     outputs: dict[str, Any] = {
         "frames": frames_dir,
@@ -496,26 +496,3 @@ def render(
         if gif:
             outputs["gif"] = encode_gif(files, out / "movie.gif", fps)
     return outputs
-
-
-class _NoBar:
-    def update(self, n: int) -> None:
-        return None
-
-    def close(self) -> None:
-        return None
-
-
-def _progress(total: int, done: int, quiet: bool) -> Any:
-    if quiet:
-        return _NoBar()
-    from tqdm import tqdm
-
-    return tqdm(
-        total=total,
-        initial=done,
-        unit="frame",
-        file=sys.stderr,
-        dynamic_ncols=True,
-        desc="rendering",
-    )

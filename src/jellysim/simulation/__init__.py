@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import sys
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -28,6 +27,7 @@ from jellysim.io.checkpoint import (
     scene_mismatch,
 )
 from jellysim.io.result import RESULT_FILE, Result, ResultWriter, frame_datasets, read_frames
+from jellysim.progress import progress
 from jellysim.tentacle import kernels
 from jellysim.tentacle.flow import flow_noise_for, water_velocity
 from jellysim.tentacle.kernels import advance_frame
@@ -311,7 +311,8 @@ def run(
         start = time.perf_counter()
         simulation.prepare()
         log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
-        with _progress(scene.frame_count - 1, simulation.frame, quiet) as bar:
+        total, done = scene.frame_count - 1, simulation.frame
+        with progress(total, done, quiet, "simulating", delay=2.0) as bar:
             while simulation.frame < scene.frame_count - 1:
                 simulation.step_frame()
                 writer.append(simulation.frame_values())
@@ -328,30 +329,3 @@ def run(
         writer.close()
     remove_checkpoint(folder)
     return Result(folder)
-
-
-class _NoBar:
-    def __enter__(self) -> _NoBar:
-        return self
-
-    def __exit__(self, *args: object) -> None:
-        return None
-
-    def update(self, n: int) -> None:
-        return None
-
-
-def _progress(total: int, done: int, quiet: bool) -> Any:
-    if quiet:
-        return _NoBar()
-    from tqdm import tqdm
-
-    return tqdm(
-        total=total,
-        initial=done,
-        unit="frame",
-        delay=2.0,
-        file=sys.stderr,
-        dynamic_ncols=True,
-        desc="simulating",
-    )
