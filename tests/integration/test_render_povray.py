@@ -129,6 +129,7 @@ def test_bad_input_exits_2_with_one_line(
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and fragment in lines[0] and "Traceback" not in done.stderr
+    assert not (brown.folder / "render").exists()  # nothing written
 
 
 def test_povray_asked_for_but_missing_exits_2(brown: jellysim.Result, tmp_path: Path) -> None:

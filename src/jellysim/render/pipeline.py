@@ -398,6 +398,10 @@ def render(
         raise InputError(f"--quality {quality}: expected one of draft, final")
     for result in results:
         scene_look(result.scene, look_overrides)  # bad --set fails before anything is written
+    frame_count = min(r.frames for r in results)
+    first, stop = (0, frame_count) if frames is None else frames
+    if not 0 <= first < stop <= frame_count:
+        raise InputError(f"--frames {first}:{stop}: the result has frames 0:{frame_count}")
     frames_dir = out / "frames"
     try:
         frames_dir.mkdir(parents=True, exist_ok=True)
@@ -405,7 +409,6 @@ def render(
         raise InputError(f"--out {out}: cannot create the folder ({err.strerror})") from None
     if not os.access(out, os.W_OK) or not os.access(frames_dir, os.W_OK):
         raise InputError(f"--out {out}: the folder is not writable")
-    frame_count = min(r.frames for r in results)
     fps = float(results[0].file.attrs["fps"])
     settings = RenderSettings(
         renderer=renderer,
@@ -431,9 +434,6 @@ def render(
         boxes = np.concatenate([m.boxes()[:frame_count] for m in members])
         room_box = povray.room_box(boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0))
         cameras = [outside(c, room_box) for c in cameras]
-    first, stop = (0, frame_count) if frames is None else frames
-    if not 0 <= first < stop <= frame_count:
-        raise InputError(f"--frames {first}:{stop}: the result has frames 0:{frame_count}")
     wanted = range(first, stop)
     todo = [i for i in wanted if not (frames_dir / f"frame_{i:05d}.png").is_file()]
     pov_dir = out / "pov"
