@@ -104,6 +104,16 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--force", action="store_true", help="render every frame again")
     render.add_argument("--quiet", action="store_true", help="no progress")
 
+    export = sub.add_parser("export", help="files for other tools (ParaView: vtk)")
+    export.add_argument("dir", help="folder holding result.h5")
+    export.add_argument("--format", required=True, dest="fmt", help="vtk")
+    export.add_argument("--out", help="output folder (default: DIR/export/FORMAT)")
+    export.add_argument("--frames", metavar="A:B", help="frames A to B-1 only")
+    export.add_argument("--every", type=int, default=1, metavar="K", help="every K-th frame")
+    export.add_argument(
+        "--interpolation", type=int, metavar="N", help="drawn tentacles per simulated one"
+    )
+
     sub.add_parser("presets", help="list the presets")
     show = sub.add_parser("show", help="print a preset's TOML")
     show.add_argument("name")
@@ -226,6 +236,19 @@ def _cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from jellysim.export import export
+    from jellysim.io.result import open_result
+
+    frames = _parse_frames(args.frames)
+    with open_result(args.dir) as result:
+        out = Path(args.out) if args.out else None
+        paths = export(result, args.fmt, out, frames, args.every, args.interpolation)
+    for path in paths:
+        print(path)
+    return 0
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from jellysim.species import preset_names, preset_summary
 
@@ -254,6 +277,7 @@ COMMANDS = {
     "plot": _cmd_plot,
     "sweep": _cmd_sweep,
     "render": _cmd_render,
+    "export": _cmd_export,
     "presets": _cmd_presets,
     "show": _cmd_show,
 }

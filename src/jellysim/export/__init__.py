@@ -1,0 +1,54 @@
+"""``jellysim export``: a result as files for other tools, chosen by format name.
+
+Every exporter takes an open result, an output folder, the frames to write and the number of
+drawn tentacles per simulated one, and returns the files a user opens first.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+from jellysim.errors import InputError
+from jellysim.io.result import Result
+
+Exporter = Callable[[Result, Path, range, "int | None"], list[Path]]
+
+
+def _vtk(result: Result, out: Path, frames: range, interpolation: int | None) -> list[Path]:
+    from jellysim.export.vtk import export_vtk
+
+    return export_vtk(result, out, frames, interpolation)
+
+
+EXPORTERS: dict[str, Exporter] = {"vtk": _vtk}
+
+
+def export(
+    result: Result,
+    fmt: str,
+    out: Path | None = None,
+    frames: tuple[int, int] | None = None,
+    every: int = 1,
+    interpolation: int | None = None,
+) -> list[Path]:
+    """Export ``result`` as ``fmt`` into ``out`` (default ``DIR/export/<fmt>``)."""
+    if fmt not in EXPORTERS:
+        raise InputError(f"--format {fmt}: unknown; expected one of {', '.join(EXPORTERS)}")
+    if every < 1:
+        raise InputError(f"--every {every}: expected at least 1")
+    if interpolation is not None and not 1 <= interpolation <= 1000:
+        raise InputError(f"--interpolation {interpolation}: expected 1 to 1000")
+    count = result.frames
+    first, stop = (0, count) if frames is None else frames
+    if not 0 <= first < stop <= count:
+        raise InputError(f"--frames {first}:{stop}: the result has frames 0:{count}")
+    folder = out if out is not None else result.folder / "export" / fmt
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"--out {folder}: cannot create the folder ({err.strerror})") from None
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"--out {folder}: the folder is not writable")
+    return EXPORTERS[fmt](result, folder, range(first, stop, every), interpolation)

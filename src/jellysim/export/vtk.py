@@ -1,0 +1,129 @@
+"""VTK export for ParaView: one VTU file per frame and part, indexed by a ``.pvd`` per part.
+
+Parts (each present only when the result has it):
+
+- ``fluid``: the live fluid particles as vertex cells, with ``pressure`` (Pa), ``velocity``
+  (m/s, 3 components), ``number_density`` and ``kind`` (0 fluid, 1 wall, 2 dummy) and the
+  particle's index in the result (``particle``). A 2-D fluid's (x, y) is written as (x, y, 0).
+- ``tentacles``: every drawn tentacle (cosine interpolation) as line segments, with the index of
+  the drawn tentacle (``tentacle``) and the particle's distance from the root (``arc_length``, m).
+- ``bell``: the bell's surface triangles.
+
+Files: ``OUT/<part>_NNNNN.vtu`` and ``OUT/<part>.pvd`` (open the ``.pvd`` in ParaView: a time
+series at the result's frame times).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from jellysim.io.result import Result
+
+
+def _write_pvd(path: Path, entries: list[tuple[float, str]]) -> Path:
+    lines = [
+        '<?xml version="1.0"?>',
+        '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+        "  <Collection>",
+        *(
+            f'    <DataSet timestep="{time!r}" group="" part="0" file={quoteattr(name)}/>'
+            for time, name in entries
+        ),
+        "  </Collection>",
+        "</VTKFile>",
+    ]
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    temporary.replace(path)
+    return path
+
+
+def _as_3d(points: np.ndarray) -> np.ndarray:
+    if points.shape[-1] == 3:
+        return points
+    padded = np.zeros((*points.shape[:-1], 3))
+    padded[..., : points.shape[-1]] = points
+    return padded
+
+
+def fluid_mesh(result: Result, frame: int) -> Any:
+    """The fluid particles alive at ``frame`` as a meshio Mesh of vertex cells."""
+    import meshio
+
+    f = result.file
+    position = np.asarray(f["fluid/position"][frame], dtype=np.float64)
+    alive = (
+        np.asarray(f["fluid/alive"][frame], dtype=bool)
+        if "fluid/alive" in f
+        else np.ones(position.shape[0], dtype=bool)
+    )
+    index = np.nonzero(alive)[0]
+    point_data: dict[str, np.ndarray] = {"particle": index.astype(np.int64)}
+    if "fluid/velocity" in f:
+        point_data["velocity"] = _as_3d(np.asarray(f["fluid/velocity"][frame])[index])
+    for name in ("pressure", "number_density"):
+        if f"fluid/{name}" in f:
+            point_data[name] = np.asarray(f[f"fluid/{name}"][frame], dtype=np.float64)[index]
+    if "fluid/kind" in f:
+        point_data["kind"] = np.asarray(f["fluid/kind"][:], dtype=np.int32)[index]
+    cells = [("vertex", np.arange(index.size, dtype=np.int64)[:, None])]
+    return meshio.Mesh(_as_3d(position[index]), cells, point_data=point_data)
+
+
+def tentacle_mesh(drawn: np.ndarray, spacing: float) -> Any:
+    """Drawn tentacles (N, P, 3) as a meshio Mesh of line segments."""
+    import meshio
+
+    count, particles, _ = drawn.shape
+    ids = np.arange(count * particles).reshape(count, particles)
+    segments = np.stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()], axis=1)
+    return meshio.Mesh(
+        drawn.reshape(-1, 3),
+        [("line", segments.astype(np.int64))],
+        point_data={
+            "tentacle": np.repeat(np.arange(count), particles).astype(np.int32),
+            "arc_length": np.tile(spacing * np.arange(particles), count),
+        },
+    )
+
+
+def bell_mesh(result: Result, frame: int) -> Any:
+    import meshio
+
+    vertices = np.asarray(result.file["bell/surface_vertices"][frame], dtype=np.float64)
+    faces = np.asarray(result.file["bell/surface_faces"][:], dtype=np.int64)
+    return meshio.Mesh(vertices, [("triangle", faces)])
+
+
+def export_vtk(
+    result: Result, out: Path, frames: range, interpolation: int | None = None
+) -> list[Path]:
+    """Write the VTU time series of ``frames`` into ``out``; returns the ``.pvd`` files."""
+    import meshio
+
+    f = result.file
+    times = result.time
+    parts: dict[str, list[tuple[float, str]]] = {}
+    drawn = None
+    if "tentacles/position" in f:
+        from jellysim.interpolation import interpolate_result
+
+        drawn = interpolate_result(result, interpolation)
+    spacing = result.scene.tentacles.spacing
+    for frame in frames:
+        meshes = {}
+        if "fluid/position" in f:
+            meshes["fluid"] = fluid_mesh(result, frame)
+        if drawn is not None:
+            meshes["tentacles"] = tentacle_mesh(drawn[frame], spacing)
+        if "bell/surface_vertices" in f:
+            meshes["bell"] = bell_mesh(result, frame)
+        for part, mesh in meshes.items():
+            name = f"{part}_{frame:05d}.vtu"
+            meshio.write(out / name, mesh, file_format="vtu")
+            parts.setdefault(part, []).append((float(times[frame]), name))
+    return [_write_pvd(out / f"{part}.pvd", entries) for part, entries in parts.items()]

@@ -1,0 +1,103 @@
+"""``jellysim export DIR --format vtk``: VTU files per frame and part, read back with meshio and
+compared with result.h5; the .pvd index lists them at the frame times."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import h5py
+import meshio
+import numpy as np
+import pytest
+
+import jellysim
+from jellysim.export import export
+from jellysim.interpolation import interpolate_result
+
+
+@pytest.fixture(scope="module")
+def brown(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
+    folder = tmp_path_factory.mktemp("brown")
+    return jellysim.run("brown-jelly", folder, overrides={"duration": 0.5, "fps": 10.0})
+
+
+def _pvd(path: Path) -> list[tuple[float, str]]:
+    return [(float(d.attrib["timestep"]), d.attrib["file"]) for d in ET.parse(path).iter("DataSet")]
+
+
+def test_tentacles_and_bell_round_trip(brown: jellysim.Result, tmp_path: Path) -> None:
+    paths = export(brown, "vtk", tmp_path, every=2, interpolation=3)
+    assert sorted(p.name for p in paths) == ["bell.pvd", "tentacles.pvd"]
+    entries = _pvd(tmp_path / "tentacles.pvd")
+    frames = list(range(0, brown.frames, 2))
+    np.testing.assert_allclose([t for t, _ in entries], brown.time[frames])
+    drawn = interpolate_result(brown, 3)
+    faces = brown.file["bell/surface_faces"][:]
+    for frame, (_, name) in zip(frames, entries, strict=True):
+        mesh = meshio.read(tmp_path / name)
+        np.testing.assert_allclose(mesh.points, drawn[frame].reshape(-1, 3), atol=1e-12)
+        lines = mesh.cells_dict["line"]
+        assert lines.shape == (18 * 59, 2)  # 6 x 3 drawn tentacles of 60 particles
+        np.testing.assert_array_equal(np.unique(mesh.point_data["tentacle"]), np.arange(18))
+        bell = meshio.read(tmp_path / f"bell_{frame:05d}.vtu")
+        np.testing.assert_allclose(bell.points, brown.file["bell/surface_vertices"][frame])
+        np.testing.assert_array_equal(bell.cells_dict["triangle"], faces)
+
+
+def test_fluid_particles_round_trip(tmp_path: Path) -> None:
+    folder = tmp_path / "fluid"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    frames, count = 3, 50
+    position = rng.uniform(0, 1, (frames, count, 2))
+    alive = np.ones((frames, count), dtype=bool)
+    alive[2, :5] = False
+    with h5py.File(folder / "result.h5", "w") as f:
+        f["time"] = np.arange(frames) * 0.1
+        f["fluid/position"] = position
+        f["fluid/velocity"] = rng.normal(size=(frames, count, 2))
+        f["fluid/pressure"] = rng.uniform(0, 1e3, (frames, count))
+        f["fluid/number_density"] = rng.uniform(5, 7, (frames, count))
+        f["fluid/alive"] = alive
+        f["fluid/kind"] = (np.arange(count) % 3).astype(np.int8)
+        f.attrs["scene"] = 'name = "block"\n'
+        f.attrs["fps"] = 10.0
+        f.attrs["frames_expected"] = frames
+    with jellysim.open_result(folder) as result:
+        paths = export(result, "vtk", tmp_path / "out")
+    assert [p.name for p in paths] == ["fluid.pvd"]
+    last = meshio.read(tmp_path / "out" / "fluid_00002.vtu")
+    assert last.points.shape == (45, 3)  # dead particles left out
+    np.testing.assert_allclose(last.points[:, :2], position[2, 5:])
+    np.testing.assert_array_equal(last.point_data["particle"], np.arange(5, 50))
+    with h5py.File(folder / "result.h5") as f:
+        np.testing.assert_allclose(last.point_data["pressure"], f["fluid/pressure"][2, 5:])
+        np.testing.assert_allclose(last.point_data["velocity"][:, :2], f["fluid/velocity"][2, 5:])
+        np.testing.assert_allclose(
+            last.point_data["number_density"], f["fluid/number_density"][2, 5:]
+        )
+        np.testing.assert_array_equal(last.point_data["kind"], f["fluid/kind"][5:])
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (("--format", "stl"), "--format stl"),
+        (("--format", "vtk", "--frames", "3:1"), "--frames"),
+        (("--format", "vtk", "--every", "0"), "--every"),
+    ],
+)
+def test_bad_export_input_exits_2(
+    brown: jellysim.Result, args: tuple[str, ...], fragment: str
+) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "jellysim", "export", str(brown.folder), *args],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert fragment in done.stderr and len(done.stderr.strip().splitlines()) == 1
