@@ -147,14 +147,60 @@ def jetting_and_relaxation(result: Result, path: Path) -> Path:
     return path
 
 
+def surge_front_plot(result: Result, path: Path) -> Path:
+    """The dam break's surge front x_front / a against T = t sqrt(2 g / a), with Martin & Moyce
+    (1952, n^2 = 2) and the RMS errors, raw and after the best time shift."""
+    from jellysim.reference import front_errors, martin_moyce, surge_front
+
+    plt = _pyplot()
+    f = result.file
+    a = float(f.attrs["column_width"])
+    g = float(np.linalg.norm(result.scene.water.gravity))
+    positions = np.asarray(f["fluid/position"][:])
+    alive = (
+        np.asarray(f["fluid/alive"][:], dtype=bool)
+        if "fluid/alive" in f
+        else np.ones(positions.shape[:2], dtype=bool)
+    )
+    fluid = (
+        np.asarray(f["fluid/kind"][:]) == 0 if "fluid/kind" in f else np.ones(alive.shape[1], bool)
+    )
+    front = surge_front(positions, alive, fluid, a)
+    t = result.time * np.sqrt(2.0 * g / a)
+    raw, shifted, shift = front_errors(t, front)
+    t_ref, z_ref = martin_moyce()
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=120)
+    ax.plot(t, front, color="tab:blue", lw=1.6, label="jellysim (MPS)")
+    ax.plot(t + shift, front, color="tab:blue", lw=1.0, ls="--", label=f"shifted by {shift:+.2f}")
+    ax.plot(t_ref, z_ref, "o", color="k", ms=4, label="Martin & Moyce (1952), n² = 2")
+    ax.set_xlabel("T = t √(2g/a)")
+    ax.set_ylabel("Z = x_front / a")
+    ax.set_xlim(0, max(3.5, float(t[-1])))
+    ax.set_title(
+        f"{result.scene.name}: surge front; RMS error {100 * raw:.1f} % "
+        f"({100 * shifted:.1f} % shifted), T <= 3",
+        fontsize=10,
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
     """Write every figure that applies to ``result`` into ``folder`` (default DIR/plots)."""
     folder = folder or result.folder / "plots"
     folder.mkdir(parents=True, exist_ok=True)
-    paths = [
-        root_tip_trace(result, folder / "root_tip_trace.png"),
-        tentacle_shapes(result, folder / "tentacle_shapes.png"),
-    ]
+    paths = []
+    if "tentacles/position" in result.file:
+        paths += [
+            root_tip_trace(result, folder / "root_tip_trace.png"),
+            tentacle_shapes(result, folder / "tentacle_shapes.png"),
+        ]
     if "bell/surface_vertices" in result.file and result.time[-1] >= result.scene.bell.period:
         paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
+    if "fluid/position" in result.file and "column_width" in result.file.attrs:
+        paths.append(surge_front_plot(result, folder / "surge_front.png"))
     return paths

@@ -1,0 +1,59 @@
+"""Experimental reference data and the measures that compare a result with it.
+
+``martin_moyce_1952_n2_a225.csv``: Martin & Moyce (1952), "An experimental study of the collapse
+of liquid columns on a rigid horizontal plane", Phil. Trans. R. Soc. A 244, Fig. for n^2 = 2
+(column height 2a, width a, a = 2.25 in): surge-front position Z = x_front / a against
+T = t sqrt(2 g / a).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+
+import numpy as np
+
+MAX_TIME_SHIFT = 0.3  # the largest shift in T allowed for the gate release's lag (issue 5)
+
+
+def martin_moyce() -> tuple[np.ndarray, np.ndarray]:
+    """The Martin & Moyce n^2 = 2 surge front: (T, Z), dimensionless."""
+    text = resources.files(__package__).joinpath("martin_moyce_1952_n2_a225.csv").read_text()
+    rows = [line for line in text.splitlines() if line and not line.startswith(("#", "T,"))]
+    data = np.array([[float(v) for v in row.split(",")] for row in rows])
+    return data[:, 0], data[:, 1]
+
+
+def surge_front(
+    positions: np.ndarray, alive: np.ndarray, fluid: np.ndarray, column_width: float
+) -> np.ndarray:
+    """The surge front per frame, x_front / a: the largest x of live fluid particles within 0.1 a
+    of the floor (y or z = 0, the last coordinate), divided by the column width a.
+
+    ``positions`` (F, N, D) m, ``alive`` (F, N) bool, ``fluid`` (N,) bool (fluid, not walls).
+    """
+    height = positions[..., -1]
+    near = alive & fluid[None, :] & (height < 0.1 * column_width)
+    x = np.where(near, positions[..., 0], -np.inf)
+    return x.max(axis=1) / column_width
+
+
+def front_errors(
+    times: np.ndarray, front: np.ndarray, until: float = 3.0
+) -> tuple[float, float, float]:
+    """RMS relative error of a surge front Z(T) against Martin & Moyce for T <= ``until``: as
+    computed, and after the best time shift |s| <= MAX_TIME_SHIFT (Z(T - s) against the
+    experiment: the gate's release makes the experiment lag every simulation).
+
+    Returns (raw, shifted, shift). ``times`` and ``front`` are dimensionless (T, Z).
+    """
+    t_ref, z_ref = martin_moyce()
+    keep = t_ref <= until
+
+    def rms(shift: float) -> float:
+        model = np.interp(t_ref[keep] - shift, times, front)
+        return float(np.sqrt(np.mean(((model - z_ref[keep]) / z_ref[keep]) ** 2)))
+
+    shifts = np.linspace(-MAX_TIME_SHIFT, MAX_TIME_SHIFT, 601)
+    errors = np.array([rms(s) for s in shifts])
+    best = int(np.argmin(errors))
+    return rms(0.0), float(errors[best]), float(shifts[best])
