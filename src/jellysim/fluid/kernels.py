@@ -1,0 +1,631 @@
+"""Compiled kernels of the MPS method [Koshizuka & Oka 1996] (equations in docs/theory/fluid.md).
+
+Arrays: positions and velocities ``(N, D)`` float64 in m and m/s (D = 2 or 3, the same kernels
+for both), pressure ``(N,)`` Pa, number density ``(N,)`` dimensionless, ``alive (N,)`` bool,
+``kind (N,)`` int8 (FLUID, WALL, DUMMY of :mod:`jellysim.fluid.geometry`). Dead particles take
+part in nothing.
+
+Every parallel loop is a gather: particle i reads its neighbours and writes only its own row, so
+results are bitwise identical whatever the number of threads. The pressure solver's reductions are
+serial for the same reason.
+
+Weight, Eq. (F1): ``w(r) = r_e / r - 1`` for ``r < r_e``, else 0.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+from jellysim.fluid.geometry import DUMMY, FLUID
+
+# fastmath limited to reassociation and contraction: no-NaN/no-inf assumptions would hide the
+# divergence that the solver must report.
+FAST = {"reassoc", "contract"}
+
+
+class Constants(NamedTuple):
+    """Model constants of one run (built once from MPSParameters and the reference lattice)."""
+
+    dim: int
+    re_number_density: float  # m
+    re_gradient: float  # m
+    re_laplacian: float  # m
+    n0: float  # reference number density with re_number_density (PPE source, surface)
+    n0_gradient: float  # with re_gradient (gradient and divergence models)
+    n0_laplacian: float  # with re_laplacian (Laplacian model)
+    lambda_laplacian: float  # m2, lambda of the Laplacian model, Eq. (F3)
+    density: float  # rho, kg/m3
+    kinematic_viscosity: float  # nu, m2/s
+
+
+class Neighbours(NamedTuple):
+    """Neighbour list in CSR form: particle i's neighbours are ``index[start[i]:start[i+1]]``
+    (within ``radius`` of it, itself excluded, alive only) at distances ``distance`` (m)."""
+
+    start: np.ndarray  # (N + 1,) int64
+    index: np.ndarray  # (M,) int64
+    distance: np.ndarray  # (M,) float64
+    radius: float  # m
+
+
+class Matrix(NamedTuple):
+    """Square sparse matrix in CSR with sorted column indices; ``diagonal[i]`` is the position
+    of entry (i, i) in ``data``."""
+
+    indptr: np.ndarray  # (n + 1,) int64
+    indices: np.ndarray  # (nnz,) int64
+    data: np.ndarray  # (nnz,) float64
+    diagonal: np.ndarray  # (n,) int64
+
+
+@njit(cache=True)
+def weight(r: float, re: float) -> float:
+    """Eq. (F1): ``w = r_e / r - 1`` for ``0 < r < r_e``, else 0 (dimensionless)."""
+    if r < re:
+        return re / r - 1.0
+    return 0.0
+
+
+# ---------------------------------------------------------------------------- neighbour search
+
+
+@njit(cache=True)
+def _cell_offsets(dim: int) -> np.ndarray:
+    """The 3^D offsets of a cell's neighbourhood, (3^D, D) int64, in a fixed order."""
+    count = 3**dim
+    out = np.empty((count, dim), dtype=np.int64)
+    for c in range(count):
+        rest = c
+        for k in range(dim):
+            out[c, k] = rest % 3 - 1
+            rest //= 3
+    return out
+
+
+@njit(cache=True)
+def neighbour_list(
+    position: np.ndarray, alive: np.ndarray, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cell-list search: all pairs of live particles closer than ``radius`` (m).
+
+    Cells of side ``radius`` over the live particles' bounding box, filled by a stable counting
+    sort; particle i scans the 3^D cells around its own. Returns the arrays of
+    :class:`Neighbours` ``(start, index, distance)``; within a row the order is fixed (cell order,
+    then particle index). The arrays are allocated here because their sizes depend on the
+    configuration.
+    """
+    n, dim = position.shape
+    lower = np.full(dim, np.inf)
+    upper = np.full(dim, -np.inf)
+    for i in range(n):
+        if alive[i]:
+            for k in range(dim):
+                lower[k] = min(lower[k], position[i, k])
+                upper[k] = max(upper[k], position[i, k])
+    inverse = 1.0 / radius
+    shape = np.ones(dim, dtype=np.int64)
+    for k in range(dim):
+        if upper[k] >= lower[k]:
+            shape[k] = int((upper[k] - lower[k]) * inverse) + 1
+    stride = np.ones(dim, dtype=np.int64)
+    for k in range(1, dim):
+        stride[k] = stride[k - 1] * shape[k - 1]
+    n_cells = stride[dim - 1] * shape[dim - 1]
+    cell_of = np.full(n, -1, dtype=np.int64)
+    coords = np.zeros((n, dim), dtype=np.int64)
+    counts = np.zeros(n_cells + 1, dtype=np.int64)
+    for i in range(n):
+        if alive[i]:
+            c = 0
+            for k in range(dim):
+                q = min(int((position[i, k] - lower[k]) * inverse), shape[k] - 1)
+                coords[i, k] = q
+                c += q * stride[k]
+            cell_of[i] = c
+            counts[c + 1] += 1
+    for c in range(n_cells):
+        counts[c + 1] += counts[c]
+    fill = counts[:-1].copy()
+    members = np.empty(counts[n_cells], dtype=np.int64)
+    for i in range(n):
+        if cell_of[i] >= 0:
+            members[fill[cell_of[i]]] = i
+            fill[cell_of[i]] += 1
+    offsets = _cell_offsets(dim)
+    radius2 = radius * radius
+
+    row_count = np.zeros(n + 1, dtype=np.int64)
+    for i in prange(n):
+        if cell_of[i] < 0:
+            continue
+        found = 0
+        for o in range(offsets.shape[0]):
+            c = 0
+            inside = True
+            for k in range(dim):
+                q = coords[i, k] + offsets[o, k]
+                if q < 0 or q >= shape[k]:
+                    inside = False
+                c += q * stride[k]
+            if not inside:
+                continue
+            for m in range(counts[c], counts[c + 1]):
+                j = members[m]
+                if j == i:
+                    continue
+                r2 = 0.0
+                for k in range(dim):
+                    d = position[j, k] - position[i, k]
+                    r2 += d * d
+                if r2 < radius2:
+                    found += 1
+        row_count[i + 1] = found
+    for i in range(n):
+        row_count[i + 1] += row_count[i]
+    index = np.empty(row_count[n], dtype=np.int64)
+    distance = np.empty(row_count[n])
+    for i in prange(n):
+        if cell_of[i] < 0:
+            continue
+        slot = row_count[i]
+        for o in range(offsets.shape[0]):
+            c = 0
+            inside = True
+            for k in range(dim):
+                q = coords[i, k] + offsets[o, k]
+                if q < 0 or q >= shape[k]:
+                    inside = False
+                c += q * stride[k]
+            if not inside:
+                continue
+            for m in range(counts[c], counts[c + 1]):
+                j = members[m]
+                if j == i:
+                    continue
+                r2 = 0.0
+                for k in range(dim):
+                    d = position[j, k] - position[i, k]
+                    r2 += d * d
+                if r2 < radius2:
+                    index[slot] = j
+                    distance[slot] = math.sqrt(r2)
+                    slot += 1
+    return row_count, index, distance
+
+
+# ------------------------------------------------------------------------------- particle models
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def number_density(
+    neighbours: Neighbours, alive: np.ndarray, re: float, out: np.ndarray, count: np.ndarray
+) -> None:
+    """Particle number density, Eq. (F2): ``n_i = sum_j w(|r_j - r_i|, r_e)`` over live particles
+    of every kind (dummies included) into ``out``; ``count`` receives the number of neighbours
+    closer than r_e (for neighbour-count surface detection)."""
+    for i in prange(alive.shape[0]):
+        total = 0.0
+        found = 0
+        if alive[i]:
+            for m in range(neighbours.start[i], neighbours.start[i + 1]):
+                r = neighbours.distance[m]
+                if r < re:
+                    total += weight(r, re)
+                    found += 1
+        out[i] = total
+        count[i] = found
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def explicit_stage(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    kind: np.ndarray,
+    alive: np.ndarray,
+    neighbours: Neighbours,
+    constants: Constants,
+    acceleration: np.ndarray,
+    dt: float,
+    out_position: np.ndarray,
+    out_velocity: np.ndarray,
+) -> None:
+    """Explicit stage, Eq. (F5): temporary velocity and position of fluid particles.
+
+    ``u*_i = u_i + dt (nu (2D / (lambda n0)) sum_j (u_j - u_i) w(r_ij, r_e,lap) + a_i)``,
+    ``r*_i = r_i + dt u*_i``, summed over live neighbours of every kind (walls and dummies carry
+    their own velocity, zero for a fixed tank: the no-slip wall). ``acceleration`` (N, D) m/s2:
+    gravity plus external force over density. Other kinds are copied unchanged.
+    """
+    n, dim = position.shape
+    re = constants.re_laplacian
+    coefficient = (
+        constants.kinematic_viscosity
+        * 2.0
+        * dim
+        / (constants.lambda_laplacian * constants.n0_laplacian)
+    )
+    for i in prange(n):
+        if not alive[i] or kind[i] != FLUID:
+            for k in range(dim):
+                out_velocity[i, k] = velocity[i, k]
+                out_position[i, k] = position[i, k]
+            continue
+        laplacian = np.zeros(dim)
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            r = neighbours.distance[m]
+            if r < re:
+                j = neighbours.index[m]
+                w = weight(r, re)
+                for k in range(dim):
+                    laplacian[k] += (velocity[j, k] - velocity[i, k]) * w
+        for k in range(dim):
+            u = velocity[i, k] + dt * (coefficient * laplacian[k] + acceleration[i, k])
+            out_velocity[i, k] = u
+            out_position[i, k] = position[i, k] + dt * u
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def collision(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    kind: np.ndarray,
+    alive: np.ndarray,
+    neighbours: Neighbours,
+    distance: float,
+    restitution: float,
+    dt: float,
+    out_position: np.ndarray,
+    out_velocity: np.ndarray,
+) -> None:
+    """Collision model, Eq. (F6): pairs closer than ``distance`` (m) that approach each other
+    exchange momentum as equal masses with restitution e.
+
+    With ``e_ij = (r_j - r_i) / |r_j - r_i|`` and approach speed ``v_n = (u_i - u_j) . e_ij > 0``,
+    fluid particle i receives ``-(1 + e) / 2 v_n e_ij`` from every such neighbour (all kinds;
+    walls are not moved). All pairs use the velocities before the stage (Jacobi form), so a
+    fluid pair's impulses are equal and opposite: fluid momentum is conserved exactly. The
+    position moves by ``dt`` times the velocity change. Distances are recomputed from
+    ``position``; ``neighbours`` only needs to contain every pair closer than ``distance``.
+    """
+    n, dim = position.shape
+    half = 0.5 * (1.0 + restitution)
+    for i in prange(n):
+        for k in range(dim):
+            out_velocity[i, k] = velocity[i, k]
+            out_position[i, k] = position[i, k]
+        if not alive[i] or kind[i] != FLUID:
+            continue
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            j = neighbours.index[m]
+            r2 = 0.0
+            for k in range(dim):
+                d = position[j, k] - position[i, k]
+                r2 += d * d
+            if r2 >= distance * distance or r2 == 0.0:
+                continue
+            r = math.sqrt(r2)
+            approach = 0.0
+            for k in range(dim):
+                approach += (velocity[i, k] - velocity[j, k]) * (position[j, k] - position[i, k])
+            approach /= r
+            if approach <= 0.0:
+                continue
+            for k in range(dim):
+                du = -half * approach * (position[j, k] - position[i, k]) / r
+                out_velocity[i, k] += du
+                out_position[i, k] += dt * du
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def velocity_divergence(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    kind: np.ndarray,
+    alive: np.ndarray,
+    neighbours: Neighbours,
+    constants: Constants,
+    out: np.ndarray,
+) -> None:
+    """Divergence model, Eq. (F9): ``(D / n0) sum_j (u_j - u_i) . (r_j - r_i) / r^2 w(r, r_e,grad)``
+    (1/s) over live fluid and wall neighbours; 0 for other particles."""
+    n, dim = position.shape
+    re = constants.re_gradient
+    coefficient = dim / constants.n0_gradient
+    for i in prange(n):
+        total = 0.0
+        if alive[i] and kind[i] != DUMMY:
+            for m in range(neighbours.start[i], neighbours.start[i + 1]):
+                j = neighbours.index[m]
+                r = neighbours.distance[m]
+                if r >= re or kind[j] == DUMMY:
+                    continue
+                dot = 0.0
+                for k in range(dim):
+                    dot += (velocity[j, k] - velocity[i, k]) * (position[j, k] - position[i, k])
+                total += dot / (r * r) * weight(r, re)
+        out[i] = coefficient * total
+
+
+# ------------------------------------------------------------------------------ pressure Poisson
+
+
+@njit(cache=True)
+def number_unknowns(unknown: np.ndarray, out: np.ndarray) -> int:
+    """Row number of each unknown particle (-1 for the others) into ``out``; returns the count."""
+    count = 0
+    for i in range(unknown.shape[0]):
+        if unknown[i]:
+            out[i] = count
+            count += 1
+        else:
+            out[i] = -1
+    return count
+
+
+@njit(cache=True, parallel=True)
+def assemble_poisson(
+    neighbours: Neighbours,
+    kind: np.ndarray,
+    alive: np.ndarray,
+    row_of: np.ndarray,
+    n_rows: int,
+    constants: Constants,
+    diagonal_shift: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Matrix of the pressure Poisson equation, Eq. (F8), over the unknown particles (live fluid
+    and wall particles not on the free surface; ``row_of`` numbers them).
+
+    ``A p = b`` with ``-(2D / (lambda n0)) sum_j (p_j - p_i) w(r_ij, r_e,lap) + c p_i``:
+    off-diagonal ``A_ij = -a_ij`` for unknown neighbours j, ``a_ij = (2D / (lambda n0)) w``;
+    diagonal ``sum_j a_ij`` over live fluid and wall neighbours (free-surface neighbours, p_j = 0,
+    enter only here) plus ``diagonal_shift`` = c (the compressibility term, 1/m2). Symmetric,
+    weakly diagonally dominant, positive definite when c > 0 or a Dirichlet neighbour is reached.
+    Returns (indptr, indices, data, diagonal) of :class:`Matrix`, columns sorted per row.
+    """
+    n = kind.shape[0]
+    re = constants.re_laplacian
+    coefficient = 2.0 * constants.dim / (constants.lambda_laplacian * constants.n0_laplacian)
+    particle_of = np.empty(n_rows, dtype=np.int64)
+    for i in range(n):
+        if row_of[i] >= 0:
+            particle_of[row_of[i]] = i
+    indptr = np.zeros(n_rows + 1, dtype=np.int64)
+    for row in prange(n_rows):
+        i = particle_of[row]
+        found = 1
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            if neighbours.distance[m] < re and row_of[neighbours.index[m]] >= 0:
+                found += 1
+        indptr[row + 1] = found
+    for row in range(n_rows):
+        indptr[row + 1] += indptr[row]
+    indices = np.empty(indptr[n_rows], dtype=np.int64)
+    data = np.empty(indptr[n_rows])
+    diagonal = np.empty(n_rows, dtype=np.int64)
+    for row in prange(n_rows):
+        i = particle_of[row]
+        start = indptr[row]
+        end = start + 1
+        indices[start] = row
+        total = 0.0
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            r = neighbours.distance[m]
+            j = neighbours.index[m]
+            if r >= re or kind[j] == DUMMY or not alive[j]:
+                continue
+            a = coefficient * weight(r, re)
+            total += a
+            if row_of[j] >= 0:
+                indices[end] = row_of[j]
+                data[end] = -a
+                end += 1
+        data[start] = total + diagonal_shift
+        # Insertion sort of the row by column (rows are short).
+        for p in range(start + 1, end):
+            column = indices[p]
+            value = data[p]
+            q = p - 1
+            while q >= start and indices[q] > column:
+                indices[q + 1] = indices[q]
+                data[q + 1] = data[q]
+                q -= 1
+            indices[q + 1] = column
+            data[q + 1] = value
+        for p in range(start, end):
+            if indices[p] == row:
+                diagonal[row] = p
+    return indptr, indices, data, diagonal
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def multiply(matrix: Matrix, x: np.ndarray, out: np.ndarray) -> None:
+    """``out = A x`` (row-wise gather)."""
+    for row in prange(matrix.indptr.shape[0] - 1):
+        total = 0.0
+        for p in range(matrix.indptr[row], matrix.indptr[row + 1]):
+            total += matrix.data[p] * x[matrix.indices[p]]
+        out[row] = total
+
+
+@njit(cache=True)
+def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
+    """IC(0): ``L L^T ~ A + shift diag(A)`` with L on the lower pattern of A, Eq. (F11).
+
+    ``out`` has A's layout (``matrix.data``'s shape); its lower-triangle entries, diagonal
+    included, receive L (upper entries are left untouched). Row by row:
+    ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
+    ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
+    """
+    indptr = matrix.indptr
+    indices = matrix.indices
+    diagonal = matrix.diagonal
+    for i in range(indptr.shape[0] - 1):
+        start = indptr[i]
+        for p in range(start, diagonal[i]):
+            k = indices[p]
+            total = matrix.data[p]
+            # merge the lower parts of rows i (before column k) and k (before its diagonal)
+            a = start
+            b = indptr[k]
+            while a < p and b < diagonal[k]:
+                ca = indices[a]
+                cb = indices[b]
+                if ca == cb:
+                    total -= out[a] * out[b]
+                    a += 1
+                    b += 1
+                elif ca < cb:
+                    a += 1
+                else:
+                    b += 1
+            out[p] = total / out[diagonal[k]]
+        pivot = matrix.data[diagonal[i]] * (1.0 + shift)
+        for p in range(start, diagonal[i]):
+            pivot -= out[p] * out[p]
+        if not pivot > 0.0:
+            return False
+        out[diagonal[i]] = math.sqrt(pivot)
+    return True
+
+
+@njit(cache=True)
+def _precondition(matrix: Matrix, factor: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
+    """``z = (L L^T)^-1 r``: forward substitution on L's rows, then backward substitution on
+    L^T by columns (row i of L is column i of L^T), so no transpose is stored."""
+    indptr = matrix.indptr
+    indices = matrix.indices
+    diagonal = matrix.diagonal
+    n = r.shape[0]
+    for i in range(n):
+        total = r[i]
+        for p in range(indptr[i], diagonal[i]):
+            total -= factor[p] * z[indices[p]]
+        z[i] = total / factor[diagonal[i]]
+    for i in range(n - 1, -1, -1):
+        z[i] /= factor[diagonal[i]]
+        for p in range(indptr[i], diagonal[i]):
+            z[indices[p]] -= factor[p] * z[i]
+
+
+@njit(cache=True)
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    total = 0.0
+    for i in range(a.shape[0]):
+        total += a[i] * b[i]
+    return total
+
+
+@njit(cache=True)
+def conjugate_gradient(
+    matrix: Matrix,
+    factor: np.ndarray,
+    preconditioned: bool,
+    b: np.ndarray,
+    x: np.ndarray,
+    tolerance: float,
+    max_iterations: int,
+) -> tuple[int, float]:
+    """(Preconditioned) conjugate gradients for ``A x = b``, Eq. (F12), from the initial guess
+    in ``x`` (overwritten by the solution). Stops when ``|b - A x| <= tolerance |b|``.
+
+    With ``preconditioned`` the IC(0) factor in ``factor`` (from :func:`incomplete_cholesky`)
+    preconditions; otherwise plain CG. Returns (iterations, relative residual).
+    """
+    n = b.shape[0]
+    norm_b = math.sqrt(_dot(b, b))
+    if n == 0:
+        return 0, 0.0
+    if norm_b == 0.0:
+        x[:] = 0.0
+        return 0, 0.0
+    r = np.empty(n)
+    multiply(matrix, x, r)
+    for i in range(n):
+        r[i] = b[i] - r[i]
+    z = np.empty(n)
+    if preconditioned:
+        _precondition(matrix, factor, r, z)
+    else:
+        z[:] = r
+    d = z.copy()
+    q = np.empty(n)
+    rz = _dot(r, z)
+    residual = math.sqrt(_dot(r, r)) / norm_b
+    iterations = 0
+    while residual > tolerance and iterations < max_iterations:
+        multiply(matrix, d, q)
+        alpha = rz / _dot(d, q)
+        for i in range(n):
+            x[i] += alpha * d[i]
+            r[i] -= alpha * q[i]
+        iterations += 1
+        residual = math.sqrt(_dot(r, r)) / norm_b
+        if not math.isfinite(residual):
+            break
+        if preconditioned:
+            _precondition(matrix, factor, r, z)
+        else:
+            z[:] = r
+        rz_new = _dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(n):
+            d[i] = z[i] + beta * d[i]
+    return iterations, residual
+
+
+# ------------------------------------------------------------------------------------ correction
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def pressure_correction(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    pressure: np.ndarray,
+    kind: np.ndarray,
+    alive: np.ndarray,
+    neighbours: Neighbours,
+    constants: Constants,
+    dt: float,
+    out_position: np.ndarray,
+    out_velocity: np.ndarray,
+) -> None:
+    """Pressure gradient with the minimum neighbour pressure, Eq. (F10), and the correction of
+    fluid particles, Eq. (F13):
+
+    ``grad p_i = (D / n0) sum_j (p_j - p_min,i) / r_ij^2 (r_j - r_i) w(r_ij, r_e,grad)``, with
+    ``p_min,i`` the least pressure among i and its fluid and wall neighbours within r_e,grad
+    (dummies are ignored); ``u_i += -dt grad p_i / rho``, ``r_i += dt`` times that change.
+    Other kinds are copied unchanged.
+    """
+    n, dim = position.shape
+    re = constants.re_gradient
+    coefficient = -dt * dim / (constants.n0_gradient * constants.density)
+    for i in prange(n):
+        for k in range(dim):
+            out_velocity[i, k] = velocity[i, k]
+            out_position[i, k] = position[i, k]
+        if not alive[i] or kind[i] != FLUID:
+            continue
+        lowest = pressure[i]
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            j = neighbours.index[m]
+            if neighbours.distance[m] < re and kind[j] != DUMMY:
+                lowest = min(lowest, pressure[j])
+        gradient = np.zeros(dim)
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            j = neighbours.index[m]
+            r = neighbours.distance[m]
+            if r >= re or kind[j] == DUMMY:
+                continue
+            scale = (pressure[j] - lowest) / (r * r) * weight(r, re)
+            for k in range(dim):
+                gradient[k] += scale * (position[j, k] - position[i, k])
+        for k in range(dim):
+            du = coefficient * gradient[k]
+            out_velocity[i, k] += du
+            out_position[i, k] += dt * du

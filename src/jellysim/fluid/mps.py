@@ -1,0 +1,468 @@
+"""The MPS solver: parameters, state and the semi-implicit step [Koshizuka & Oka 1996].
+
+References
+----------
+- Koshizuka, S. & Oka, Y. (1996). Moving-particle semi-implicit method for fragmentation of
+  incompressible fluid. Nucl. Sci. Eng. 123, 421-434. The standard scheme (default).
+- Tanaka, M. & Masunaga, T. (2010). Stabilization and smoothing of pressure in MPS method by
+  Quasi-Compressibility. J. Comput. Phys. 229, 4279-4290. Mixed source term
+  (``source="mixed"``) and the neighbour-count surface criterion (``surface="neighbour-count"``).
+- Ikeda, H., Koshizuka, S., Oka, Y. et al. (2001). Numerical analysis of jet injection behavior
+  for fuel-coolant interaction using particle method. J. Nucl. Sci. Technol. 38, 174-182. The
+  compressibility term of the pressure Poisson equation.
+
+Equation numbers (F1)-(F13) refer to docs/theory/fluid.md.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from jellysim.errors import SimulationUnstable
+from jellysim.fluid import kernels
+from jellysim.fluid.geometry import DUMMY, FLUID, WALL
+
+SOURCES = ("standard", "mixed")
+SURFACES = ("standard", "neighbour-count")
+SOLVERS = ("iccg", "cg")
+
+IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
+
+
+class FluidDiverged(SimulationUnstable):
+    """The pressure solve did not converge, or the state stopped being finite (exit status 3).
+
+    ``time`` is the solver's own clock (the sum of the steps taken), in s.
+    """
+
+    def __init__(self, message: str, *, time: float, iterations: int, residual: float) -> None:
+        super().__init__(message, time=time)
+        self.iterations = iterations
+        self.residual = residual
+
+
+@dataclass(frozen=True)
+class MPSParameters:
+    """What the user sets for an MPS fluid (SI units; radii in units of l0).
+
+    Defaults are the standard scheme of Koshizuka & Oka (1996): r_e = 2.1 l0 for the number
+    density and the gradient, 4.0 l0 for the Laplacian in 2-D. In 3-D the Laplacian radius
+    defaults to 3.1 l0 (the customary 3-D choice; 4.0 l0 would give ~270 neighbours a particle).
+
+    - ``source``: "standard", PPE source ``-(rho/dt^2)(n* - n0)/n0`` [Koshizuka & Oka 1996];
+      "mixed", ``(rho/dt) div u* - gamma (rho/dt^2)(n^k - n0)/n0`` with gamma =
+      ``mixed_relaxation`` [Tanaka & Masunaga 2010].
+    - ``surface``: "standard", free surface where ``n* < beta n0``; "neighbour-count", also where
+      fewer than ``surface_neighbour_threshold`` N0 neighbours lie within r_e (N0 the lattice
+      count) [Tanaka & Masunaga 2010].
+    - ``solver``: "iccg" (IC(0)-preconditioned CG) or "cg" (plain CG, for comparison);
+      ``tolerance`` is the relative residual ``|b - A p| / |b|``.
+    - ``compressibility`` alpha (1/Pa): adds ``(rho alpha / dt^2) p`` to the PPE's left side, the
+      fluid's slight compressibility [Ikeda et al. 2001]. It keeps the matrix non-singular when no
+      particle is on the free surface; water's 0.45e-9 1/Pa makes it a regulariser only.
+    - ``domain_min``/``domain_max`` (m): particles leaving the box die (``alive`` False). None:
+      the initial particles' bounding box widened by its own size on every side.
+    """
+
+    dim: int
+    l0: float
+    density: float = 1000.0
+    kinematic_viscosity: float = 1e-6
+    gravity: tuple[float, ...] | None = None  # m/s2; None: 9.81 down the last axis
+    re_number_density: float = 2.1
+    re_gradient: float = 2.1
+    re_laplacian: float | None = None  # None: 4.0 in 2-D, 3.1 in 3-D
+    surface_threshold: float = 0.97
+    surface_neighbour_threshold: float = 0.85
+    collision_distance: float = 0.5
+    collision_restitution: float = 0.2
+    source: str = "standard"
+    mixed_relaxation: float = 0.01
+    surface: str = "standard"
+    solver: str = "iccg"
+    tolerance: float = 1e-8
+    max_iterations: int = 2000
+    courant: float = 0.2
+    diffusion_number: float = 0.2
+    compressibility: float = 0.45e-9
+    domain_min: tuple[float, ...] | None = None
+    domain_max: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, not {self.dim}")
+        for name, value, allowed in (
+            ("source", self.source, SOURCES),
+            ("surface", self.surface, SURFACES),
+            ("solver", self.solver, SOLVERS),
+        ):
+            if value not in allowed:
+                raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
+        if self.gravity is not None and len(self.gravity) != self.dim:
+            raise ValueError(f"gravity needs {self.dim} components, not {len(self.gravity)}")
+
+    @property
+    def laplacian_radius(self) -> float:
+        """r_e of the Laplacian model in units of l0."""
+        if self.re_laplacian is not None:
+            return self.re_laplacian
+        return 4.0 if self.dim == 2 else 3.1
+
+    @property
+    def gravity_vector(self) -> np.ndarray:
+        """Gravity (dim,) m/s2."""
+        if self.gravity is None:
+            g = np.zeros(self.dim)
+            g[-1] = -9.81
+            return g
+        return np.asarray(self.gravity, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class LatticeReference:
+    """n0 and lambda of a particle with a full neighbourhood on the perfect lattice (Eq. F2-F3).
+
+    ``count``: neighbours within r_e. ``n0`` dimensionless, ``lambda_`` in m2.
+    """
+
+    n0: float
+    lambda_: float
+    count: int
+
+
+def lattice_reference(dim: int, l0: float, re: float) -> LatticeReference:
+    """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the square/cubic lattice points
+    ``r_j = l0 m`` (integer m != 0) with ``|r_j| < re l0``."""
+    reach = int(math.ceil(re))
+    axis = np.arange(-reach, reach + 1)
+    offsets = np.stack(np.meshgrid(*([axis] * dim), indexing="ij"), axis=-1).reshape(-1, dim)
+    r = np.sqrt((offsets.astype(np.float64) ** 2).sum(axis=1)) * l0
+    r = r[(r > 0) & (r < re * l0)]
+    w = re * l0 / r - 1.0
+    return LatticeReference(float(w.sum()), float((w * r * r).sum() / w.sum()), int(r.size))
+
+
+@dataclass
+class StepStats:
+    """What one step did: pressure-solver iterations and final relative residual, the IC(0)
+    diagonal shift used (0: none needed), free-surface and dead particle counts, and the wall
+    time of each phase (s)."""
+
+    iterations: int = 0
+    residual: float = 0.0
+    ic_shift: float = 0.0
+    surface: int = 0
+    dead: int = 0
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+class MPSSolver:
+    """An MPS fluid: live state arrays mutated in place by :meth:`step`.
+
+    State (N particles, D = ``params.dim``): ``position`` (N, D) m, ``velocity`` (N, D) m/s,
+    ``pressure`` (N,) Pa (also the warm start of the next solve), ``number_density`` (N,)
+    dimensionless (n* of the last step), ``alive`` (N,) bool, ``kind`` (N,) int8, ``time`` s.
+    Walls and dummies keep their velocity (zero for a fixed tank) and position. Dummy particles
+    only add number density: their pressure is 0 and they are ignored by the gradient. Negative
+    pressures of the solution are clipped to 0.
+    """
+
+    def __init__(self, params: MPSParameters, positions: np.ndarray, kinds: np.ndarray) -> None:
+        positions = np.asarray(positions, dtype=np.float64)
+        if positions.ndim != 2 or positions.shape[1] != params.dim:
+            raise ValueError(f"positions must be (N, {params.dim}), not {positions.shape}")
+        if kinds.shape != (positions.shape[0],):
+            raise ValueError("kinds must be (N,)")
+        self.params = params
+        l0 = params.l0
+        dim = params.dim
+        number_density = lattice_reference(dim, l0, params.re_number_density)
+        gradient = lattice_reference(dim, l0, params.re_gradient)
+        laplacian = lattice_reference(dim, l0, params.laplacian_radius)
+        self.reference = {
+            "number_density": number_density,
+            "gradient": gradient,
+            "laplacian": laplacian,
+        }
+        self.constants = kernels.Constants(
+            dim=dim,
+            re_number_density=params.re_number_density * l0,
+            re_gradient=params.re_gradient * l0,
+            re_laplacian=params.laplacian_radius * l0,
+            n0=number_density.n0,
+            n0_gradient=gradient.n0,
+            n0_laplacian=laplacian.n0,
+            lambda_laplacian=laplacian.lambda_,
+            density=params.density,
+            kinematic_viscosity=params.kinematic_viscosity,
+        )
+        self.search_radius = max(
+            params.re_number_density, params.re_gradient, params.laplacian_radius
+        ) * l0
+        n = positions.shape[0]
+        self.position = positions.copy()
+        self.velocity = np.zeros((n, dim))
+        self.pressure = np.zeros(n)
+        self.number_density = np.zeros(n)
+        self.alive = np.ones(n, dtype=np.bool_)
+        self.kind = kinds.astype(np.int8).copy()
+        self.time = 0.0
+        if params.domain_min is None or params.domain_max is None:
+            low = positions.min(axis=0)
+            high = positions.max(axis=0)
+            size = high - low
+            self.domain_min = low - size
+            self.domain_max = high + size
+        else:
+            self.domain_min = np.asarray(params.domain_min, dtype=np.float64)
+            self.domain_max = np.asarray(params.domain_max, dtype=np.float64)
+        # scratch
+        self._position = np.empty_like(self.position)
+        self._velocity = np.empty_like(self.velocity)
+        self._acceleration = np.empty_like(self.velocity)
+        self._neighbour_count = np.zeros(n, dtype=np.int64)
+        self._scratch = np.zeros(n)
+        self._row_of = np.empty(n, dtype=np.int64)
+
+    # ------------------------------------------------------------------------------ time step
+
+    def stable_dt(self, external_acceleration: float = 0.0) -> float:
+        """The largest step the stability limits allow (s), the least of:
+
+        - CFL: ``courant l0 / u``, u the largest fluid speed, floored at ``sqrt(2 a H)`` with a
+          = |g| + ``external_acceleration`` (m/s2, the largest external force over density) and
+          H the fluid's extent along gravity: the speed of a free fall over the fluid's height;
+        - acceleration: ``sqrt(courant l0 / a)``, the step in which a particle at rest moves
+          courant l0;
+        - viscosity: ``diffusion_number l0^2 / nu``.
+        """
+        p = self.params
+        fluid = self.alive & (self.kind == FLUID)
+        a = float(np.linalg.norm(p.gravity_vector)) + external_acceleration
+        limits = [math.inf]
+        if fluid.any():
+            speed = float(np.sqrt((self.velocity[fluid] ** 2).sum(axis=1)).max())
+            g = p.gravity_vector
+            axis = g / np.linalg.norm(g) if np.any(g) else np.eye(p.dim)[-1]
+            along = self.position[fluid] @ axis
+            height = float(along.max() - along.min()) + p.l0
+            speed = max(speed, math.sqrt(2.0 * a * height))
+            if speed > 0.0:
+                limits.append(p.courant * p.l0 / speed)
+        if a > 0.0:
+            limits.append(math.sqrt(p.courant * p.l0 / a))
+        if p.kinematic_viscosity > 0.0:
+            limits.append(p.diffusion_number * p.l0**2 / p.kinematic_viscosity)
+        return min(limits)
+
+    def step(self, dt: float, external_force: np.ndarray | None = None) -> StepStats:
+        """Advance the fluid by ``dt`` (s), in place.
+
+        ``external_force`` (N, D) N/m3: a force density on fluid particles (a spring force on a
+        particle divided by its volume l0^D), added to gravity in the explicit stage as
+        ``external_force / density``. Raises :class:`FluidDiverged` when the pressure solve does
+        not converge within ``max_iterations`` or leaves non-finite values; the state is then
+        that of the failed step.
+        """
+        p = self.params
+        c = self.constants
+        stats = StepStats()
+        clock = _time.perf_counter()
+
+        def lap(name: str) -> None:
+            nonlocal clock
+            now = _time.perf_counter()
+            stats.seconds[name] = stats.seconds.get(name, 0.0) + now - clock
+            clock = now
+
+        # Neighbours at r^k
+        nb = kernels.Neighbours(
+            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            self.search_radius,
+        )
+        if p.source == "mixed":  # n^k for the mixed source [Tanaka & Masunaga 2010]
+            kernels.number_density(
+                nb, self.alive, c.re_number_density, self._scratch, self._neighbour_count
+            )
+        lap("neighbours")
+
+        # Explicit stage: viscosity, gravity, external force, Eq. (F5)
+        self._acceleration[:] = p.gravity_vector
+        if external_force is not None:
+            self._acceleration += external_force / p.density
+        kernels.explicit_stage(
+            self.position, self.velocity, self.kind, self.alive, nb, c,
+            self._acceleration, dt, self._position, self._velocity,
+        )  # fmt: skip
+        # Collision model, Eq. (F6); r^k neighbours hold every pair closer than 0.5 l0 at r*.
+        kernels.collision(
+            self._position, self._velocity, self.kind, self.alive, nb,
+            p.collision_distance * p.l0, p.collision_restitution, dt,
+            self.position, self.velocity,
+        )  # fmt: skip
+        lap("explicit")
+
+        # Neighbours and number density n* at r*, Eq. (F2)
+        nb = kernels.Neighbours(
+            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            self.search_radius,
+        )
+        kernels.number_density(
+            nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
+        )
+        lap("neighbours")
+
+        # Free surface (Dirichlet p = 0), Eq. (F7), and the PPE, Eq. (F8)
+        solid = self.alive & (self.kind != DUMMY)
+        surface = self.number_density < p.surface_threshold * c.n0
+        if p.surface == "neighbour-count":
+            count0 = self.reference["number_density"].count
+            surface |= self._neighbour_count < p.surface_neighbour_threshold * count0
+        surface &= solid
+        unknown = solid & ~surface
+        stats.surface = int(surface.sum())
+        n_rows = kernels.number_unknowns(unknown, self._row_of)
+        shift = p.density * p.compressibility / dt**2
+        matrix = kernels.Matrix(
+            *kernels.assemble_poisson(
+                nb, self.kind, self.alive, self._row_of, n_rows, c, shift
+            )
+        )
+        rhs = self.poisson_source(dt, unknown)
+        lap("assembly")
+
+        # Solve by ICCG (or CG), warm-started from the previous pressure, Eq. (F11)-(F12)
+        solution = self.pressure[unknown].copy()
+        iterations, residual, stats.ic_shift = solve(
+            matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations
+        )
+        stats.iterations = iterations
+        stats.residual = residual
+        if not (residual <= p.tolerance and np.all(np.isfinite(solution))):
+            raise FluidDiverged(
+                f"pressure solve stopped at relative residual {residual:.3g} after "
+                f"{iterations} iterations (tolerance {p.tolerance:.3g}); reduce the time step",
+                time=self.time,
+                iterations=iterations,
+                residual=residual,
+            )
+        self.pressure[:] = 0.0
+        self.pressure[unknown] = np.maximum(solution, 0.0)  # negative pressures clipped
+        lap("solve")
+
+        # Pressure gradient and correction, Eq. (F10), (F13)
+        kernels.pressure_correction(
+            self.position, self.velocity, self.pressure, self.kind, self.alive, nb, c, dt,
+            self._position, self._velocity,
+        )  # fmt: skip
+        self.position[:] = self._position
+        self.velocity[:] = self._velocity
+        self.time += dt
+        # Particles that left the domain or stopped being finite die
+        leaving = self.alive & (self.kind == FLUID)
+        finite = np.isfinite(self.position).all(axis=1) & np.isfinite(self.velocity).all(axis=1)
+        inside = np.all((self.position >= self.domain_min) & (self.position <= self.domain_max), 1)
+        dying = leaving & ~(finite & inside)
+        if dying.any():
+            self.alive[dying] = False
+            self.velocity[dying] = 0.0
+            self.pressure[dying] = 0.0
+        stats.dead = int((~self.alive).sum())
+        lap("correction")
+        return stats
+
+    def poisson_source(self, dt: float, unknown: np.ndarray) -> np.ndarray:
+        """Right-hand side b of ``A p = b`` for the unknown particles (Pa/m2), Eq. (F8)-(F9):
+        standard ``(rho/dt^2)(n* - n0)/n0``; mixed ``-(rho/dt) div u* + gamma (rho/dt^2)
+        (n^k - n0)/n0`` (n^k from the start of the step)."""
+        p = self.params
+        c = self.constants
+        if p.source == "standard":
+            deviation = (self.number_density[unknown] - c.n0) / c.n0
+            return p.density / dt**2 * deviation
+        divergence = np.zeros(self.pressure.shape[0])
+        kernels.velocity_divergence(
+            self.position, self.velocity, self.kind, self.alive,
+            kernels.Neighbours(
+                *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+                self.search_radius,
+            ),
+            c, divergence,
+        )  # fmt: skip
+        deviation = (self._scratch[unknown] - c.n0) / c.n0
+        return -p.density / dt * divergence[unknown] + (
+            p.mixed_relaxation * p.density / dt**2 * deviation
+        )
+
+    # ---------------------------------------------------------------------------- checkpoints
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of everything a bitwise resume needs (the pressure is the warm start)."""
+        return {
+            "position": self.position.copy(),
+            "velocity": self.velocity.copy(),
+            "pressure": self.pressure.copy(),
+            "number_density": self.number_density.copy(),
+            "alive": self.alive.copy(),
+            "kind": self.kind.copy(),
+            "time": np.array(self.time),
+        }
+
+    def restore(self, arrays: dict[str, np.ndarray]) -> None:
+        """Load a :meth:`state_arrays` dictionary into the live arrays (in place)."""
+        for name in ("position", "velocity", "pressure", "number_density", "alive", "kind"):
+            target = getattr(self, name)
+            if arrays[name].shape != target.shape:
+                raise ValueError(f"{name}: shape {arrays[name].shape}, expected {target.shape}")
+            target[...] = arrays[name]
+        self.time = float(arrays["time"])
+
+
+def solve(
+    matrix: kernels.Matrix,
+    rhs: np.ndarray,
+    solution: np.ndarray,
+    method: str = "iccg",
+    tolerance: float = 1e-8,
+    max_iterations: int = 2000,
+) -> tuple[int, float, float]:
+    """Solve the PPE in place in ``solution`` (initial guess in, answer out) by ICCG or CG.
+
+    IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a pivot is
+    not positive. Returns (iterations, relative residual, shift used).
+    """
+    factor = np.zeros_like(matrix.data)
+    shift = 0.0
+    if method == "iccg":
+        for shift in (0.0, *IC_SHIFTS):
+            if kernels.incomplete_cholesky(matrix, shift, factor):
+                break
+        else:
+            raise FluidDiverged(
+                "IC(0) broke down even with the largest diagonal shift",
+                time=math.nan,
+                iterations=0,
+                residual=math.inf,
+            )
+    iterations, residual = kernels.conjugate_gradient(
+        matrix, factor, method == "iccg", rhs, solution, tolerance, max_iterations
+    )
+    return iterations, residual, shift
+
+
+__all__ = [
+    "DUMMY",
+    "FLUID",
+    "WALL",
+    "FluidDiverged",
+    "LatticeReference",
+    "MPSParameters",
+    "MPSSolver",
+    "StepStats",
+    "lattice_reference",
+    "solve",
+]
