@@ -1,13 +1,13 @@
 """Initial particle arrangements for MPS on a square (2-D) or cubic (3-D) lattice of spacing l0.
 
-Lattice convention: every particle sits on a lattice point ``index * l0`` (integer indices). The
-inner faces of a tank are lattice planes: left inner wall at x = 0, floor at y = 0 (2-D, y up) or
-z = 0 (3-D, z up; the tank spans x in [0, width], y in [0, depth]). Fluid particles are the lattice
-points strictly inside; a water block ``(x0, x1]`` takes the points with ``x0 < i l0 <= x1``, so a
-block starting at a wall never overlaps it and holds ``round((x1 - x0) / l0)`` particles across.
-Each fluid particle stands for a cell of side l0 centred on it, so the water reaches half a spacing
-beyond the outermost particles (and the wall surface sits half a spacing in front of the wall
-particles).
+Cell-centred convention: space is cut into cells of side l0 with faces on the planes ``i l0``, and
+every particle sits at a cell centre ``(i + 1/2) l0``, standing for that cell's volume. The inner
+faces of a tank are cell faces: left inner wall at x = 0, floor at y = 0 (2-D, y up) or z = 0
+(3-D, z up; the tank spans x in [0, width], y in [0, depth]). Wall particles fill the cells just
+outside those faces (the first wall layer is centred half a spacing behind the face), dummy
+particles the cells beyond. A water block ``[x0, x1]`` takes the cells whose centres lie inside
+it: a block of width ``a`` from a wall holds ``a / l0`` particles across, its water fills exactly
+``[0, a]``, and it never overlaps a wall.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 
 FLUID, WALL, DUMMY = 0, 1, 2  # particle kinds (stored as int8)
 
-_TOLERANCE = 1e-9  # in l0: lattice points on a block's boundary
+_TOLERANCE = 1e-9  # in l0: cell centres on a block's boundary count as inside
 
 
 def _cells(length: float, l0: float) -> int:
@@ -37,9 +37,9 @@ def tank(
 ) -> tuple[np.ndarray, np.ndarray]:
     """An open-top tank: ``(positions (N, dim) m float64, kinds (N,) int8)``.
 
-    Wall particles fill the ``wall_layers`` lattice layers from the inner faces outwards (the
-    first on the faces themselves), dummy particles the next ``dummy_layers`` layers. Corners are
-    filled. The side walls rise from the floor to ``inner_height``. ``inner_width``,
+    Wall particles fill the ``wall_layers`` layers of cells outside the inner faces, dummy
+    particles the next ``dummy_layers`` layers. Corners are filled. The side walls rise from the
+    floor to ``inner_height`` (their top cell's centre is half a spacing below it). ``inner_width``,
     ``inner_height`` (and ``inner_depth`` in 3-D) must be whole multiples of l0.
     """
     if dim not in (2, 3):
@@ -51,18 +51,17 @@ def tank(
             raise ValueError("a 3-D tank needs inner_depth")
         horizontal.append(_cells(inner_depth, l0))
     top = _cells(inner_height, l0)
-    axes = [np.arange(-layers, n + layers + 1) for n in horizontal]
-    axes.append(np.arange(-layers, top + 1))
+    # cell indices i: centres (i + 1/2) l0; inner cells 0..n-1 horizontally, 0.. vertically
+    axes = [np.arange(-layers, n + layers) for n in horizontal]
+    axes.append(np.arange(-layers, top))
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
-    # Depth outside the inner region, in layers: 0 on the inner faces.
-    outside = np.maximum(-grid[:, -1], 0)
-    interior = grid[:, -1] >= 1
+    # Layer behind the inner faces: 0 for the cells touching them.
+    outside = -grid[:, -1] - 1
     for k, n in enumerate(horizontal):
-        outside = np.maximum(outside, np.maximum(-grid[:, k], grid[:, k] - n))
-        interior &= (grid[:, k] >= 1) & (grid[:, k] <= n - 1)
-    keep = ~interior
+        outside = np.maximum(outside, np.maximum(-grid[:, k] - 1, grid[:, k] - n))
+    keep = outside >= 0
     kinds = np.where(outside[keep] < wall_layers, WALL, DUMMY).astype(np.int8)
-    return grid[keep].astype(np.float64) * l0, kinds
+    return (grid[keep].astype(np.float64) + 0.5) * l0, kinds
 
 
 def water_block(
@@ -74,15 +73,16 @@ def water_block(
     z0: float | None = None,
     z1: float | None = None,
 ) -> np.ndarray:
-    """Fluid positions ``(N, dim)`` m: the lattice points with ``x0 < x <= x1``, ``y0 < y <= y1``
-    (and ``z0 < z <= z1`` in 3-D, when z0 and z1 are given). The last coordinate is up."""
+    """Fluid positions ``(N, dim)`` m: the cell centres ``(i + 1/2) l0`` inside the box
+    ``[x0, x1] x [y0, y1]`` (``x [z0, z1]`` in 3-D, when z0 and z1 are given). The last
+    coordinate is up."""
     bounds = [(x0, x1), (y0, y1)]
     if z0 is not None and z1 is not None:
         bounds.append((z0, z1))
     axes = []
     for lo, hi in bounds:
-        first = int(np.floor(lo / l0 + _TOLERANCE)) + 1
-        last = int(np.floor(hi / l0 + _TOLERANCE))
+        first = int(np.ceil(lo / l0 - 0.5 - _TOLERANCE))
+        last = int(np.floor(hi / l0 - 0.5 + _TOLERANCE))
         axes.append(np.arange(first, last + 1))
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(bounds))
-    return grid.astype(np.float64) * l0
+    return (grid.astype(np.float64) + 0.5) * l0

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -144,6 +146,18 @@ def lattice_reference(dim: int, l0: float, re: float) -> LatticeReference:
     r = r[(r > 0) & (r < re * l0)]
     w = re * l0 / r - 1.0
     return LatticeReference(float(w.sum()), float((w * r * r).sum() / w.sum()), int(r.size))
+
+
+class PoissonSystem(NamedTuple):
+    """``A p = b`` over the unknown particles (``unknown`` (N,) bool, in particle order): A in
+    1/m2, b (n,) Pa/m2; ``surface`` the number of free-surface particles; ``neighbours`` the
+    list at the positions it was built on."""
+
+    matrix: kernels.Matrix
+    rhs: np.ndarray
+    unknown: np.ndarray
+    surface: int
+    neighbours: kernels.Neighbours
 
 
 @dataclass
@@ -306,40 +320,21 @@ class MPSSolver:
         )  # fmt: skip
         lap("explicit")
 
-        # Neighbours and number density n* at r*, Eq. (F2)
-        nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
-            self.search_radius,
-        )
-        kernels.number_density(
-            nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
-        )
-        lap("neighbours")
-
-        # Free surface (Dirichlet p = 0), Eq. (F7), and the PPE, Eq. (F8)
-        solid = self.alive & (self.kind != DUMMY)
-        surface = self.number_density < p.surface_threshold * c.n0
-        if p.surface == "neighbour-count":
-            count0 = self.reference["number_density"].count
-            surface |= self._neighbour_count < p.surface_neighbour_threshold * count0
-        surface &= solid
-        unknown = solid & ~surface
-        stats.surface = int(surface.sum())
-        n_rows = kernels.number_unknowns(unknown, self._row_of)
-        shift = p.density * p.compressibility / dt**2
-        matrix = kernels.Matrix(
-            *kernels.assemble_poisson(
-                nb, self.kind, self.alive, self._row_of, n_rows, c, shift
-            )
-        )
-        rhs = self.poisson_source(dt, unknown)
-        lap("assembly")
+        # Neighbours, number density n*, free surface and PPE at r*, Eq. (F2), (F7)-(F9)
+        system = self.poisson_system(dt, clock=lap)
+        stats.surface = system.surface
+        matrix, rhs, unknown = system.matrix, system.rhs, system.unknown
 
         # Solve by ICCG (or CG), warm-started from the previous pressure, Eq. (F11)-(F12)
         solution = self.pressure[unknown].copy()
-        iterations, residual, stats.ic_shift = solve(
-            matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations
-        )
+        try:
+            iterations, residual, stats.ic_shift = solve(
+                matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations
+            )
+        except FluidDiverged as error:
+            raise FluidDiverged(
+                str(error), time=self.time, iterations=0, residual=math.inf
+            ) from None
         stats.iterations = iterations
         stats.residual = residual
         if not (residual <= p.tolerance and np.all(np.isfinite(solution))):
@@ -356,8 +351,8 @@ class MPSSolver:
 
         # Pressure gradient and correction, Eq. (F10), (F13)
         kernels.pressure_correction(
-            self.position, self.velocity, self.pressure, self.kind, self.alive, nb, c, dt,
-            self._position, self._velocity,
+            self.position, self.velocity, self.pressure, self.kind, self.alive,
+            system.neighbours, c, dt, self._position, self._velocity,
         )  # fmt: skip
         self.position[:] = self._position
         self.velocity[:] = self._velocity
@@ -375,7 +370,42 @@ class MPSSolver:
         lap("correction")
         return stats
 
-    def poisson_source(self, dt: float, unknown: np.ndarray) -> np.ndarray:
+    def poisson_system(self, dt: float, clock: Callable[[str], None] | None = None) -> PoissonSystem:
+        """The pressure Poisson equation at the current positions (taken as r*): neighbours,
+        number density n* (stored in ``number_density``), free-surface particles (Dirichlet
+        p = 0, Eq. F7) and ``A p = b`` over the other live fluid and wall particles (Eq. F8).
+        ``clock`` (if given) is called with the phase names "neighbours" and "assembly"."""
+        p = self.params
+        c = self.constants
+        nb = kernels.Neighbours(
+            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            self.search_radius,
+        )
+        kernels.number_density(
+            nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
+        )
+        if clock is not None:
+            clock("neighbours")
+        solid = self.alive & (self.kind != DUMMY)
+        surface = self.number_density < p.surface_threshold * c.n0
+        if p.surface == "neighbour-count":
+            count0 = self.reference["number_density"].count
+            surface |= self._neighbour_count < p.surface_neighbour_threshold * count0
+        surface &= solid
+        unknown = solid & ~surface
+        n_rows = kernels.number_unknowns(unknown, self._row_of)
+        shift = p.density * p.compressibility / dt**2
+        matrix = kernels.Matrix(
+            *kernels.assemble_poisson(nb, self.kind, self.alive, self._row_of, n_rows, c, shift)
+        )
+        rhs = self.poisson_source(dt, unknown, nb)
+        if clock is not None:
+            clock("assembly")
+        return PoissonSystem(matrix, rhs, unknown, int(surface.sum()), nb)
+
+    def poisson_source(
+        self, dt: float, unknown: np.ndarray, neighbours: kernels.Neighbours
+    ) -> np.ndarray:
         """Right-hand side b of ``A p = b`` for the unknown particles (Pa/m2), Eq. (F8)-(F9):
         standard ``(rho/dt^2)(n* - n0)/n0``; mixed ``-(rho/dt) div u* + gamma (rho/dt^2)
         (n^k - n0)/n0`` (n^k from the start of the step)."""
@@ -386,12 +416,7 @@ class MPSSolver:
             return p.density / dt**2 * deviation
         divergence = np.zeros(self.pressure.shape[0])
         kernels.velocity_divergence(
-            self.position, self.velocity, self.kind, self.alive,
-            kernels.Neighbours(
-                *kernels.neighbour_list(self.position, self.alive, self.search_radius),
-                self.search_radius,
-            ),
-            c, divergence,
+            self.position, self.velocity, self.kind, self.alive, neighbours, c, divergence,
         )  # fmt: skip
         deviation = (self._scratch[unknown] - c.n0) / c.n0
         return -p.density / dt * divergence[unknown] + (

@@ -1,0 +1,153 @@
+"""MPS kernels against closed forms and slow oracles: weights and lattice constants as data,
+cell list against brute force, momentum of the explicit stage and the collision model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from jellysim.fluid import kernels
+from jellysim.fluid.geometry import DUMMY, FLUID, WALL, tank, water_block
+from jellysim.fluid.mps import MPSParameters, MPSSolver, lattice_reference
+
+# Lattice shells (squared distance in l0^2, number of lattice points), counted by hand.
+SHELLS_2D_R21 = [(1, 4), (2, 4), (4, 4)]  # 12 points; sqrt(5) = 2.236 lies outside 2.1
+SHELLS_2D_R40 = [(1, 4), (2, 4), (4, 4), (5, 8), (8, 4), (9, 4), (10, 8), (13, 8)]  # 44
+SHELLS_3D_R21 = [(1, 6), (2, 12), (3, 8), (4, 6)]  # 32
+SHELLS_3D_R31 = [(1, 6), (2, 12), (3, 8), (4, 6), (5, 24), (6, 24), (8, 12), (9, 30)]  # 122
+
+
+def by_hand(shells: list[tuple[int, int]], re: float) -> tuple[float, float, int]:
+    n0 = sum(count * (re / math.sqrt(r2) - 1.0) for r2, count in shells)
+    moment = sum(count * (re / math.sqrt(r2) - 1.0) * r2 for r2, count in shells)
+    return n0, moment / n0, sum(count for _, count in shells)
+
+
+def test_weight_values() -> None:
+    re = 2.1
+    assert kernels.weight(1.0, re) == pytest.approx(1.1)
+    assert kernels.weight(math.sqrt(2.0), re) == pytest.approx(0.48492424049175)
+    assert kernels.weight(2.0, re) == pytest.approx(0.05)
+    assert kernels.weight(2.1, re) == 0.0
+    assert kernels.weight(3.0, re) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("dim", "re", "shells", "n0_literal"),
+    [
+        (2, 2.1, SHELLS_2D_R21, 6.539696961967),
+        (2, 4.0, SHELLS_2D_R40, None),
+        (3, 2.1, SHELLS_3D_R21, None),
+        (3, 3.1, SHELLS_3D_R31, None),
+    ],
+)
+def test_lattice_constants_against_hand_counts(dim, re, shells, n0_literal) -> None:
+    l0 = 0.01
+    n0, lam, count = by_hand(shells, re)
+    ref = lattice_reference(dim, l0, re)
+    assert ref.count == count
+    assert ref.n0 == pytest.approx(n0, rel=1e-12)
+    assert ref.lambda_ == pytest.approx(lam * l0**2, rel=1e-12)
+    if n0_literal is not None:
+        assert ref.n0 == pytest.approx(n0_literal, rel=1e-12)
+
+
+def test_solver_constants_use_the_lattice() -> None:
+    positions, kinds = tank(0.05, 0.05, 0.01)
+    solver = MPSSolver(MPSParameters(dim=2, l0=0.01), positions, kinds)
+    assert solver.constants.n0 == pytest.approx(6.539696961967)
+    n0_lap, lam_lap, _ = by_hand(SHELLS_2D_R40, 4.0)
+    assert solver.constants.n0_laplacian == pytest.approx(n0_lap)
+    assert solver.constants.lambda_laplacian == pytest.approx(lam_lap * 1e-4)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cell_list_equals_brute_force(dim: int) -> None:
+    rng = np.random.default_rng(7)
+    n = 400 if dim == 2 else 600
+    position = rng.uniform(0.0, 1.0, (n, dim)) * np.array([1.0, 0.6, 0.8][:dim])
+    alive = rng.random(n) > 0.1
+    radius = 0.13
+    start, index, distance = kernels.neighbour_list(position, alive, radius)
+    diff = position[:, None, :] - position[None, :, :]
+    r = np.sqrt((diff**2).sum(-1))
+    for i in range(n):
+        found = sorted(index[start[i] : start[i + 1]].tolist())
+        if not alive[i]:
+            assert found == []
+            continue
+        expected = [j for j in range(n) if j != i and alive[j] and r[i, j] < radius]
+        assert found == expected
+        got = dict(zip(index[start[i] : start[i + 1]], distance[start[i] : start[i + 1]]))
+        for j in expected:
+            assert got[j] == pytest.approx(r[i, j], rel=1e-12)
+
+
+def blob(dim: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A free, jittered fluid block (no walls) with random velocities."""
+    l0 = 0.01
+    position = water_block(0, 0.12, 0, 0.1, l0, *((0, 0.06) if dim == 3 else ()))
+    rng = np.random.default_rng(seed)
+    position = position + rng.uniform(-0.2, 0.2, position.shape) * l0
+    velocity = rng.normal(0.0, 0.1, position.shape)
+    return position, velocity, np.full(position.shape[0], FLUID, dtype=np.int8)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_explicit_stage_conserves_fluid_momentum_without_gravity(dim: int) -> None:
+    """Viscosity in the gather form: pair (i, j) adds nu C w (u_j - u_i) to i and the opposite to
+    j (same C = 2D/(lambda n0) for all), so with only fluid particles and no body force the total
+    momentum sum_i u_i (equal masses) is unchanged to round-off."""
+    position, velocity, kind = blob(dim, 1)
+    params = MPSParameters(dim=dim, l0=0.01, kinematic_viscosity=0.05)
+    solver = MPSSolver(params, position, kind)
+    nb = kernels.Neighbours(
+        *kernels.neighbour_list(position, solver.alive, solver.search_radius),
+        solver.search_radius,
+    )
+    out_x = np.empty_like(position)
+    out_u = np.empty_like(velocity)
+    zero = np.zeros_like(velocity)
+    dt = 1e-3
+    kernels.explicit_stage(
+        position, velocity, kind, solver.alive, nb, solver.constants, zero, dt, out_x, out_u
+    )
+    change = np.abs(out_u - velocity).sum(axis=0)
+    assert np.all(change > 1e-3)  # the viscosity does act
+    np.testing.assert_allclose(out_u.sum(axis=0), velocity.sum(axis=0), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out_x, position + dt * out_u, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_collision_conserves_momentum(dim: int) -> None:
+    position, velocity, kind = blob(dim, 2)
+    rng = np.random.default_rng(3)
+    position = position + rng.uniform(-0.3, 0.3, position.shape) * 0.01  # many close pairs
+    alive = np.ones(kind.shape[0], dtype=np.bool_)
+    radius = 0.5 * 0.01
+    nb = kernels.Neighbours(*kernels.neighbour_list(position, alive, 0.021), 0.021)
+    out_x = np.empty_like(position)
+    out_u = np.empty_like(velocity)
+    kernels.collision(position, velocity, kind, alive, nb, radius, 0.2, 1e-3, out_x, out_u)
+    assert np.abs(out_u - velocity).max() > 1e-3  # collisions happened
+    np.testing.assert_allclose(out_u.sum(axis=0), velocity.sum(axis=0), rtol=0, atol=1e-12)
+
+
+def test_tank_geometry() -> None:
+    l0 = 0.01
+    positions, kinds = tank(0.1, 0.05, l0, wall_layers=1, dummy_layers=2)
+    # 16 x 8 cells with the 10 x 5 inside removed
+    assert positions.shape == (16 * 8 - 10 * 5, 2)
+    walls = positions[kinds == WALL]
+    assert np.isclose(walls[:, 1].min(), -0.5 * l0) and np.isclose(walls[:, 0].min(), -0.5 * l0)
+    assert np.isclose(walls[:, 0].max(), 0.1 + 0.5 * l0)
+    assert (kinds == DUMMY).sum() == 16 * 8 - 12 * 6
+    fluid = water_block(0, 0.1, 0, 0.05, l0)
+    assert fluid.shape == (50, 2)
+    gap = np.sqrt(((fluid[:, None] - positions[None]) ** 2).sum(-1)).min()
+    assert gap == pytest.approx(l0)
+    positions3, kinds3 = tank(0.04, 0.03, l0, dim=3, inner_depth=0.02)
+    assert positions3.shape == (10 * 8 * 6 - 4 * 2 * 3, 3)
+    assert water_block(0, 0.04, 0, 0.02, l0, 0, 0.03).shape == (24, 3)
