@@ -1,0 +1,143 @@
+"""The pressure Poisson equation and its solvers on a dam-break configuration; checkpoints."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from jellysim.errors import SimulationUnstable
+from jellysim.fluid import kernels
+from jellysim.fluid.geometry import FLUID, tank, water_block
+from jellysim.fluid.mps import FluidDiverged, MPSParameters, MPSSolver, solve
+
+A = 0.1  # column width, m
+L0 = A / 20
+
+
+def dam_break(**overrides: object) -> MPSSolver:
+    walls, wall_kinds = tank(5 * A, 2.5 * A, L0)
+    fluid = water_block(0, A, 0, 2 * A, L0)
+    positions = np.vstack([fluid, walls])
+    kinds = np.concatenate([np.full(len(fluid), FLUID, dtype=np.int8), wall_kinds])
+    return MPSSolver(MPSParameters(dim=2, l0=L0, **overrides), positions, kinds)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def system() -> tuple[kernels.Matrix, np.ndarray]:
+    """The PPE of a dam break 20 steps after release (matrix and right-hand side)."""
+    solver = dam_break()
+    dt = 5e-4
+    for _ in range(20):
+        solver.step(dt)
+    built = solver.poisson_system(dt)
+    return built.matrix, built.rhs
+
+
+def to_scipy(matrix: kernels.Matrix) -> sp.csr_matrix:
+    n = matrix.indptr.shape[0] - 1
+    return sp.csr_matrix((matrix.data, matrix.indices, matrix.indptr), shape=(n, n))
+
+
+def test_poisson_matrix_is_symmetric_and_diagonally_dominant(system) -> None:
+    matrix, rhs = system
+    a = to_scipy(matrix)
+    assert a.shape[0] > 500 and np.any(rhs != 0)
+    assert abs(a - a.T).max() <= 1e-12 * abs(a).max()
+    diagonal = a.diagonal()
+    off = np.asarray(abs(a).sum(axis=1)).ravel() - np.abs(diagonal)
+    assert np.all(diagonal > 0)
+    assert np.all(diagonal >= off * (1 - 1e-12))  # weakly diagonally dominant
+    assert np.any(diagonal > off * 1.01)  # strictly in rows next to the free surface
+    assert np.all(a.data[a.indices != np.repeat(np.arange(a.shape[0]), np.diff(a.indptr))] < 0)
+
+
+@pytest.mark.parametrize("method", ["iccg", "cg"])
+def test_solution_equals_direct_solve(system, method: str) -> None:
+    matrix, rhs = system
+    direct = spla.spsolve(to_scipy(matrix).tocsc(), rhs)
+    x = np.zeros_like(rhs)
+    iterations, residual, shift = solve(matrix, rhs, x, method, 1e-10, 5000)
+    assert residual <= 1e-10 and shift == 0.0 and iterations > 0
+    np.testing.assert_allclose(x, direct, rtol=0, atol=1e-7 * np.abs(direct).max())
+
+
+def test_iccg_needs_three_times_fewer_iterations_than_cg(system) -> None:
+    matrix, rhs = system
+    counts = {}
+    for method in ("iccg", "cg"):
+        x = np.zeros_like(rhs)
+        counts[method], residual, _ = solve(matrix, rhs, x, method, 1e-8, 5000)
+        assert residual <= 1e-8
+    print(f"PPE n = {rhs.size}: ICCG {counts['iccg']} iterations, CG {counts['cg']}")
+    assert counts["iccg"] * 3 <= counts["cg"]
+
+
+def test_ic0_breakdown_is_shifted() -> None:
+    """An indefinite matrix makes IC(0) fail unshifted; a diagonal shift is applied and named."""
+    indptr = np.array([0, 2, 4])
+    indices = np.array([0, 1, 0, 1])
+    data = np.array([1.0, 1.05, 1.05, 1.0])
+    matrix = kernels.Matrix(indptr, indices, data, np.array([0, 3]))
+    factor = np.zeros(4)
+    assert not kernels.incomplete_cholesky(matrix, 0.0, factor)
+    assert kernels.incomplete_cholesky(matrix, 0.1, factor)
+
+
+def test_non_convergence_raises_fluid_diverged() -> None:
+    solver = dam_break(max_iterations=2)
+    with pytest.raises(FluidDiverged) as caught:
+        solver.step(5e-4)
+    assert isinstance(caught.value, SimulationUnstable)
+    assert caught.value.iterations == 2 and caught.value.residual > 1e-8
+    assert caught.value.time == 0.0
+
+
+def test_restore_resumes_bitwise() -> None:
+    solver = dam_break()
+    for _ in range(5):
+        solver.step(solver.stable_dt())
+    saved = solver.state_arrays()
+    for _ in range(5):
+        solver.step(solver.stable_dt())
+    resumed = dam_break()
+    resumed.restore(saved)
+    for _ in range(5):
+        resumed.step(resumed.stable_dt())
+    for name, value in solver.state_arrays().items():
+        assert np.array_equal(value, resumed.state_arrays()[name]), name
+
+
+def test_result_does_not_depend_on_thread_count() -> None:
+    results = []
+    default = numba.get_num_threads()
+    try:
+        for threads in (1, default):
+            numba.set_num_threads(threads)
+            solver = dam_break()
+            for _ in range(5):
+                solver.step(5e-4)
+            results.append(solver.state_arrays())
+    finally:
+        numba.set_num_threads(default)
+    for name in results[0]:
+        assert np.array_equal(results[0][name], results[1][name]), name
+
+
+def test_three_dimensional_tank_runs() -> None:
+    l0 = 0.01
+    walls, wall_kinds = tank(0.06, 0.08, l0, dim=3, inner_depth=0.05)
+    fluid = water_block(0, 0.06, 0, 0.05, l0, 0, 0.06)
+    positions = np.vstack([fluid, walls])
+    kinds = np.concatenate([np.full(len(fluid), FLUID, dtype=np.int8), wall_kinds])
+    solver = MPSSolver(MPSParameters(dim=3, l0=l0), positions, kinds)
+    for _ in range(10):
+        stats = solver.step(solver.stable_dt())
+    fluid_mask = solver.kind == FLUID
+    assert stats.dead == 0 and stats.iterations > 0
+    assert np.all(np.isfinite(solver.position))
+    bottom = fluid_mask & (solver.position[:, 2] < 1.5 * l0)
+    # bottom pressure of the same order as rho g h (0.06 m: 589 Pa)
+    assert 200.0 < solver.pressure[bottom].mean() < 1500.0
