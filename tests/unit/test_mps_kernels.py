@@ -80,7 +80,9 @@ def test_cell_list_equals_brute_force(dim: int) -> None:
             continue
         expected = [j for j in range(n) if j != i and alive[j] and r[i, j] < radius]
         assert found == expected
-        got = dict(zip(index[start[i] : start[i + 1]], distance[start[i] : start[i + 1]]))
+        got = dict(
+            zip(index[start[i] : start[i + 1]], distance[start[i] : start[i + 1]], strict=True)
+        )
         for j in expected:
             assert got[j] == pytest.approx(r[i, j], rel=1e-12)
 

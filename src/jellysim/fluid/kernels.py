@@ -43,11 +43,11 @@ class Constants(NamedTuple):
 
 
 class Neighbours(NamedTuple):
-    """Neighbour list in CSR form: particle i's neighbours are ``index[start[i]:start[i+1]]``
-    (within ``radius`` of it, itself excluded, alive only) at distances ``distance`` (m)."""
+    """Neighbour list in CSR form: particle i's neighbours are ``indices[start[i]:start[i+1]]``
+    (live particles within ``radius`` of it, itself excluded) at distances ``distance`` (m)."""
 
     start: np.ndarray  # (N + 1,) int64
-    index: np.ndarray  # (M,) int64
+    indices: np.ndarray  # (M,) int64
     distance: np.ndarray  # (M,) float64
     radius: float  # m
 
@@ -94,7 +94,7 @@ def neighbour_list(
 
     Cells of side ``radius`` over the live particles' bounding box, filled by a stable counting
     sort; particle i scans the 3^D cells around its own. Returns the arrays of
-    :class:`Neighbours` ``(start, index, distance)``; within a row the order is fixed (cell order,
+    :class:`Neighbours` ``(start, indices, distance)``; within a row the order is fixed (cell order,
     then particle index). The arrays are allocated here because their sizes depend on the
     configuration.
     """
@@ -258,7 +258,7 @@ def explicit_stage(
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             r = neighbours.distance[m]
             if r < re:
-                j = neighbours.index[m]
+                j = neighbours.indices[m]
                 w = weight(r, re)
                 for k in range(dim):
                     laplacian[k] += (velocity[j, k] - velocity[i, k]) * w
@@ -300,7 +300,7 @@ def collision(
         if not alive[i] or kind[i] != FLUID:
             continue
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
-            j = neighbours.index[m]
+            j = neighbours.indices[m]
             r2 = 0.0
             for k in range(dim):
                 d = position[j, k] - position[i, k]
@@ -339,7 +339,7 @@ def velocity_divergence(
         total = 0.0
         if alive[i] and kind[i] != DUMMY:
             for m in range(neighbours.start[i], neighbours.start[i + 1]):
-                j = neighbours.index[m]
+                j = neighbours.indices[m]
                 r = neighbours.distance[m]
                 if r >= re or kind[j] == DUMMY:
                     continue
@@ -398,7 +398,7 @@ def assemble_poisson(
         i = particle_of[row]
         found = 1
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
-            if neighbours.distance[m] < re and row_of[neighbours.index[m]] >= 0:
+            if neighbours.distance[m] < re and row_of[neighbours.indices[m]] >= 0:
                 found += 1
         indptr[row + 1] = found
     for row in range(n_rows):
@@ -414,7 +414,7 @@ def assemble_poisson(
         total = 0.0
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             r = neighbours.distance[m]
-            j = neighbours.index[m]
+            j = neighbours.indices[m]
             if r >= re or kind[j] == DUMMY or not alive[j]:
                 continue
             a = coefficient * weight(r, re)
@@ -613,12 +613,12 @@ def pressure_correction(
             continue
         lowest = pressure[i]
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
-            j = neighbours.index[m]
+            j = neighbours.indices[m]
             if neighbours.distance[m] < re and kind[j] != DUMMY:
                 lowest = min(lowest, pressure[j])
         gradient = np.zeros(dim)
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
-            j = neighbours.index[m]
+            j = neighbours.indices[m]
             r = neighbours.distance[m]
             if r >= re or kind[j] == DUMMY:
                 continue

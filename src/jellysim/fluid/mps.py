@@ -214,9 +214,9 @@ class MPSSolver:
             density=params.density,
             kinematic_viscosity=params.kinematic_viscosity,
         )
-        self.search_radius = max(
-            params.re_number_density, params.re_gradient, params.laplacian_radius
-        ) * l0
+        self.search_radius = (
+            max(params.re_number_density, params.re_gradient, params.laplacian_radius) * l0
+        )
         n = positions.shape[0]
         self.position = positions.copy()
         self.velocity = np.zeros((n, dim))
@@ -370,7 +370,9 @@ class MPSSolver:
         lap("correction")
         return stats
 
-    def poisson_system(self, dt: float, clock: Callable[[str], None] | None = None) -> PoissonSystem:
+    def poisson_system(
+        self, dt: float, clock: Callable[[str], None] | None = None
+    ) -> PoissonSystem:
         """The pressure Poisson equation at the current positions (taken as r*): neighbours,
         number density n* (stored in ``number_density``), free-surface particles (Dirichlet
         p = 0, Eq. F7) and ``A p = b`` over the other live fluid and wall particles (Eq. F8).
