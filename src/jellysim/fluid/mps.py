@@ -60,7 +60,8 @@ class MPSParameters:
       ``mixed_relaxation`` [Tanaka & Masunaga 2010].
     - ``surface``: "standard", free surface where ``n* < beta n0``; "neighbour-count", also where
       fewer than ``surface_neighbour_threshold`` N0 neighbours lie within r_e (N0 the lattice
-      count) [Tanaka & Masunaga 2010].
+      count) [Tanaka & Masunaga 2010]. Not yet sound: in the 2-D hydrostatic tank it lets a
+      surface particle be kicked to ~7 m/s after 0.14 s; use "standard".
     - ``solver``: "iccg" (IC(0)-preconditioned CG) or "cg" (plain CG, for comparison);
       ``tolerance`` is the relative residual ``|b - A p| / |b|``.
     - ``compressibility`` alpha (1/Pa): adds ``(rho alpha / dt^2) p`` to the PPE's left side, the
