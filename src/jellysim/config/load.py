@@ -213,12 +213,55 @@ def _check_consistency(scene: Scene) -> None:
             f"only bell.model = 'none' does; with bell.model = {quote(scene.bell.model)} the bell "
             "moves them: set root_motion.amplitude = 0"
         )
+    if scene.fluid.model == "none" and scene.tentacles.count == 0:
+        raise InputError(
+            "tentacles.count = 0 is not allowed: expected an integer >= 1 (0 only in fluid-only "
+            "scenes, fluid.model = 'mps')"
+        )
+    if scene.fluid.model == "mps" and scene.tentacles.count > 0:
+        raise InputError(
+            f"fluid.model = 'mps' runs fluid-only scenes: set tentacles.count = 0 (it is "
+            f"{scene.tentacles.count}); tentacles in the fluid come with the mass-spring bell"
+        )
+    if scene.fluid.model == "mps" and scene.fluid.dimensions == 2 and scene.water.gravity[2] != 0:
+        raise InputError(
+            "water.gravity: a 2-D fluid lives in the (x, y) plane with y up; give gravity as "
+            "[0, -9.81, 0]"
+        )
+    if scene.fluid.model == "mps":
+        _check_fluid(scene)
     bell = scene.bell
     if bell.model == "kinematic" and bell.swim_speed > 0.0 and bell.contraction == 0.0:
         raise InputError(
             f"bell.swim_speed = {_show(bell.swim_speed)} needs a pulsing bell: the bell "
             "swims by contracting, and bell.contraction = 0 holds it still"
         )
+
+
+def _check_fluid(scene: Scene) -> None:
+    """The tank and the water must sit on the fluid's lattice, the water inside the tank."""
+    f = scene.fluid
+    lengths = ["tank_width", "tank_height", "water_width", "water_height"]
+    if f.dimensions == 3:
+        lengths.append("tank_depth")
+    for name in lengths:
+        value = getattr(f, name)
+        cells = value / f.spacing
+        if abs(cells - round(cells)) > 1e-6 * max(1.0, cells) or round(cells) < 2:
+            raise InputError(
+                f"fluid.{name} = {_show(value)} is not a whole number (>= 2) of "
+                f"fluid.spacing = {_show(f.spacing)}: the tank and the water sit on its lattice"
+            )
+    if f.water_height > f.tank_height or f.water_width > f.tank_width:
+        raise InputError(
+            "fluid: the water must fit in the tank (water_width <= tank_width, "
+            "water_height <= tank_height)"
+        )
+    count = (f.tank_width / f.spacing) * (f.tank_height / f.spacing)
+    if f.dimensions == 3:
+        count *= f.tank_depth / f.spacing
+    if count > 20_000_000:
+        raise InputError(f"fluid: about {count:.3g} lattice cells in the tank; at most 20,000,000")
 
 
 def parse_toml(text: str, source: str) -> Tree:

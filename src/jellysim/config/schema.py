@@ -64,7 +64,13 @@ class Flow:
 
 @dataclass(frozen=True)
 class Tentacles:
-    count: int = param(6, kind="int", ge=1, le=10000, doc="number of simulated tentacles")
+    count: int = param(
+        6,
+        kind="int",
+        ge=0,
+        le=10000,
+        doc="number of simulated tentacles (0: none, a fluid-only scene)",
+    )
     particles: int = param(
         60, kind="int", ge=3, le=100000, doc="particles per tentacle, root included"
     )
@@ -174,6 +180,68 @@ class RootMotion:
 
 
 @dataclass(frozen=True)
+class Fluid:
+    model: str = param(
+        "none",
+        kind="choice",
+        choices=("none", "mps"),
+        doc="'mps': a particle fluid (Koshizuka & Oka's MPS); 'none': the assumed flow only",
+    )
+    dimensions: int = param(
+        2, kind="int", ge=2, le=3, doc="2 (x, y with y up) or 3 (z up) for a fluid-only scene"
+    )
+    spacing: float = param(
+        0.005, unit="m", gt=0.0, le=100.0, doc="particle spacing l0 of the fluid lattice"
+    )
+    geometry: str = param(
+        "dam-break",
+        kind="choice",
+        choices=("dam-break", "hydrostatic"),
+        doc="'dam-break': a water column against the left wall; 'hydrostatic': the tank "
+        "filled to water_height",
+    )
+    tank_width: float = param(0.5, unit="m", gt=0.0, le=1.0e3, doc="inner width of the tank (x)")
+    tank_height: float = param(
+        0.3, unit="m", gt=0.0, le=1.0e3, doc="inner height of the tank walls"
+    )
+    tank_depth: float = param(
+        0.1, unit="m", gt=0.0, le=1.0e3, doc="inner depth of the tank (y, 3-D only)"
+    )
+    water_width: float = param(
+        0.1, unit="m", gt=0.0, le=1.0e3, doc="width a of the water column (dam-break)"
+    )
+    water_height: float = param(
+        0.2, unit="m", gt=0.0, le=1.0e3, doc="height of the water column or of the still water"
+    )
+    source: str = param(
+        "standard",
+        kind="choice",
+        choices=("standard", "mixed"),
+        doc="PPE source: number density (Koshizuka & Oka 1996) or mixed with the velocity "
+        "divergence (Tanaka & Masunaga 2010)",
+    )
+    surface: str = param(
+        "standard",
+        kind="choice",
+        choices=("standard", "neighbour-count"),
+        doc="free-surface detection: n < beta n0 (standard), or also by neighbour count",
+    )
+    surface_threshold: float = param(
+        0.97, gt=0.5, lt=1.0, doc="beta: a particle with n < beta n0 is on the free surface"
+    )
+    solver: str = param(
+        "iccg",
+        kind="choice",
+        choices=("iccg", "cg"),
+        doc="pressure solver: incomplete-Cholesky preconditioned CG, or plain CG",
+    )
+    tolerance: float = param(
+        1.0e-8, gt=0.0, lt=1.0, doc="relative residual at which the pressure solve stops"
+    )
+    courant: float = param(0.2, gt=0.0, le=1.0, doc="Courant number of the fluid's time step")
+
+
+@dataclass(frozen=True)
 class Look:
     bell_color: tuple[float, float, float] = param(
         (0.9, 0.45, 0.15), kind="color", doc="colour of the bell (linear RGB)"
@@ -227,6 +295,7 @@ class Scene:
     tentacles: Tentacles = field(default_factory=Tentacles)
     bell: Bell = field(default_factory=Bell)
     root_motion: RootMotion = field(default_factory=RootMotion)
+    fluid: Fluid = field(default_factory=Fluid)
     look: Look = field(default_factory=Look)
     solver: Solver = field(default_factory=Solver)
 
@@ -245,5 +314,5 @@ class Scene:
 SECTIONS: dict[str, type] = {
     f.name: f.type if isinstance(f.type, type) else globals()[str(f.type)]
     for f in dataclasses.fields(Scene)
-    if f.name in ("water", "flow", "tentacles", "bell", "root_motion", "look", "solver")
+    if f.name in ("water", "flow", "tentacles", "bell", "root_motion", "fluid", "look", "solver")
 }

@@ -558,7 +558,10 @@ def conjugate_gradient(
     iterations = 0
     while residual > tolerance and iterations < max_iterations:
         multiply(matrix, d, q)
-        alpha = rz / _dot(d, q)
+        curvature = _dot(d, q)
+        if curvature == 0.0 or rz == 0.0:
+            break  # the residual is exactly zero in exact arithmetic: nothing left to reduce
+        alpha = rz / curvature
         for i in range(n):
             x[i] += alpha * d[i]
             r[i] -= alpha * q[i]

@@ -189,6 +189,45 @@ def surge_front_plot(result: Result, path: Path) -> Path:
     return path
 
 
+def hydrostatic_plot(result: Result, path: Path) -> Path:
+    """Still water: the pressure of every fluid particle against its height at the last frame,
+    with the hydrostatic law rho g (H - y) and the least-squares line."""
+    plt = _pyplot()
+    f = result.file
+    depth = float(f.attrs["water_depth"])
+    scene = result.scene
+    g = float(np.linalg.norm(scene.water.gravity))
+    rho = scene.water.density
+    fluid = np.asarray(f["fluid/kind"][:]) == 0
+    alive = np.asarray(f["fluid/alive"][-1], dtype=bool) & fluid
+    height = np.asarray(f["fluid/position"][-1])[alive, -1]
+    pressure = np.asarray(f["fluid/pressure"][-1])[alive]
+    slope, intercept = np.polyfit(height, pressure, 1)
+    fig, ax = plt.subplots(figsize=(5.6, 4.4), dpi=120)
+    ax.plot(pressure, height, ".", ms=3, color="tab:blue", label="fluid particles")
+    y = np.linspace(0.0, depth, 50)
+    ax.plot(rho * g * (depth - y), y, color="k", lw=1.4, label="ρ g (H − y)")
+    ax.plot(
+        slope * y + intercept,
+        y,
+        color="tab:red",
+        lw=1.0,
+        ls="--",
+        label=f"fit: slope {-slope / (rho * g):.3f} ρg, head {intercept / (rho * g):.4f} m",
+    )
+    ax.set_xlabel("pressure [Pa]")
+    ax.set_ylabel("height [m]")
+    ax.set_title(
+        f"{scene.name}: pressure at t = {result.time[-1]:.2f} s (H = {depth:g} m)", fontsize=10
+    )
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
     """Write every figure that applies to ``result`` into ``folder`` (default DIR/plots)."""
     folder = folder or result.folder / "plots"
@@ -203,4 +242,6 @@ def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
         paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
     if "fluid/position" in result.file and "column_width" in result.file.attrs:
         paths.append(surge_front_plot(result, folder / "surge_front.png"))
+    if "fluid/position" in result.file and "water_depth" in result.file.attrs:
+        paths.append(hydrostatic_plot(result, folder / "hydrostatic_pressure.png"))
     return paths

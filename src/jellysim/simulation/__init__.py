@@ -192,6 +192,22 @@ class Simulation:
             **self.driver.frame_values(self.time),
         }
 
+    def describe(self) -> str:
+        t = self.scene.tentacles
+        return f"{t.count} tentacles x {t.particles} particles, {self.plan.describe()}"
+
+    def checkpoint_state(self) -> dict[str, np.ndarray]:
+        return {"positions": self.positions, "velocities": self.velocities}
+
+    def restore(self, frame: int, state: dict[str, np.ndarray]) -> None:
+        """Continue from a checkpoint's state after ``frame``."""
+        self.positions[:] = state["positions"]
+        self.velocities[:] = state["velocities"]
+        self.frame = frame
+
+    def finish(self) -> None:
+        """Nothing to report beyond the result."""
+
     def datasets(self) -> list[Any]:
         t = self.scene.tentacles
         return [
@@ -225,6 +241,15 @@ class Simulation:
             "tentacle_substeps": self.plan.substeps,
             "bell_model": self.scene.bell.model,
         }
+
+
+def make_simulation(scene: Scene) -> Any:
+    """The frame loop for a scene: tentacles driven by a bell, or a fluid-only MPS scene."""
+    if scene.fluid.model == "mps":
+        from jellysim.simulation.fluid import FluidSimulation
+
+        return FluidSimulation(scene)
+    return Simulation(scene)
 
 
 def default_out(scene: Scene) -> Path:
@@ -266,7 +291,7 @@ def run(
     if resume and not result_path.exists():
         raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
 
-    simulation = Simulation(scene)
+    simulation = make_simulation(scene)
     for observer in observers or []:
         simulation.observers.append(observer)
     datasets = simulation.datasets()
@@ -280,9 +305,7 @@ def run(
             log.info("%s is complete; nothing to resume", result_path)
             return Result(folder)
         frame, state = load_checkpoint(folder, scene_toml)
-        simulation.positions[:] = state["positions"]
-        simulation.velocities[:] = state["velocities"]
-        simulation.frame = frame
+        simulation.restore(frame, state)
         kept = read_frames(result_path, datasets, frame + 1)
         writer = simulation.writer(result_path, scene_toml, kept)
     else:
@@ -298,13 +321,7 @@ def run(
         writer.append(simulation.frame_values())
 
     log.info(
-        "%s: %d tentacles x %d particles, %s, %d frames -> %s",
-        scene.name,
-        scene.tentacles.count,
-        scene.tentacles.particles,
-        simulation.plan.describe(),
-        scene.frame_count,
-        result_path,
+        "%s: %s, %d frames -> %s", scene.name, simulation.describe(), scene.frame_count, result_path
     )
     every = scene.solver.checkpoint_every
     try:
@@ -319,13 +336,11 @@ def run(
                 if simulation.frame % every == 0:
                     writer.flush()  # the checkpoint's frame must be on disk first
                     save_checkpoint(
-                        folder,
-                        simulation.frame,
-                        scene_toml,
-                        {"positions": simulation.positions, "velocities": simulation.velocities},
+                        folder, simulation.frame, scene_toml, simulation.checkpoint_state()
                     )
                 bar.update(1)
     finally:
         writer.close()
+    simulation.finish()
     remove_checkpoint(folder)
     return Result(folder)

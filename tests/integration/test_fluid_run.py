@@ -1,0 +1,128 @@
+"""Fluid-only scenes end to end: ``jellysim run dam-break-2d`` (coarse) against Martin & Moyce,
+result.h5's fluid datasets (DESIGN §3), plot and export, resume, divergence and bad input."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import jellysim
+from jellysim.fluid.geometry import FLUID
+from jellysim.reference import front_errors, surge_front
+
+COARSE = {"fluid.spacing": 0.005}  # 20 particles across the column a = 0.1 m
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "jellysim", *args], capture_output=True, text=True, check=False
+    )
+
+
+@pytest.fixture(scope="module")
+def dam(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("dam")
+    done = _cli("run", "dam-break-2d", "--out", str(out), "--quiet", "--set", "fluid.spacing=0.005")
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def test_fluid_datasets_and_attributes(dam: Path) -> None:
+    with jellysim.open_result(dam) as r:
+        f = r.file
+        frames = r.frames
+        assert frames == r.expected_frames == round(0.25 * 200) + 1
+        n = f["fluid/kind"].shape[0]
+        fluid = int(np.sum(f["fluid/kind"][:] == FLUID))
+        assert fluid == 20 * 40 == f.attrs["fluid_particles"]
+        for name, shape, units in [
+            ("fluid/position", (frames, n, 2), "m"),
+            ("fluid/velocity", (frames, n, 2), "m/s"),
+            ("fluid/pressure", (frames, n), "Pa"),
+            ("fluid/number_density", (frames, n), "1"),
+            ("fluid/alive", (frames, n), "1"),
+            ("solver/iterations", (frames,), "1"),
+        ]:
+            assert f[name].shape == shape, name
+            assert f[name].attrs["units"] == units, name
+        assert f.attrs["column_width"] == 0.1 and f.attrs["column_height"] == 0.2
+        assert f.attrs["particle_spacing"] == 0.005
+        # The DESIGN §3 geometry: left inner wall at x = 0, floor at y = 0.
+        start = f["fluid/position"][0][f["fluid/kind"][:] == FLUID]
+        assert start[:, 0].min() > 0.0 and start[:, 1].min() > 0.0
+        assert start[:, 0].max() < 0.1 and start[:, 1].max() < 0.2
+        assert np.all(f["solver/iterations"][1:] > 0)
+        assert np.all(np.isfinite(f["fluid/position"][:]))
+
+
+def test_dam_break_front_follows_martin_and_moyce(dam: Path) -> None:
+    # Issue 5: RMS relative error <= 15 % as computed and <= 5 % after one best-fit time shift
+    # of at most 0.3 in T, for T <= 3 (Martin & Moyce 1952, n^2 = 2). Coarse: 20 across a.
+    with jellysim.open_result(dam) as r:
+        f = r.file
+        a = f.attrs["column_width"]
+        front = surge_front(
+            f["fluid/position"][:], f["fluid/alive"][:], f["fluid/kind"][:] == FLUID, a
+        )
+        raw, shifted, shift = front_errors(r.time * np.sqrt(2 * 9.81 / a), front)
+    print(f"dam break 20/a: raw {raw:.3f}, shifted {shifted:.3f} by {shift:+.2f}")
+    assert raw <= 0.15
+    assert shifted <= 0.05 and 0.0 <= shift <= 0.3  # the simulation leads the experiment
+
+
+def test_plot_and_export_of_a_fluid_result(dam: Path) -> None:
+    done = _cli("plot", str(dam))
+    assert done.returncode == 0 and (dam / "plots" / "surge_front.png").is_file()
+    done = _cli("export", str(dam), "--format", "vtk", "--every", "25")
+    assert done.returncode == 0, done.stderr
+    assert (dam / "export" / "vtk" / "fluid.pvd").is_file()
+    assert len(list((dam / "export" / "vtk").glob("fluid_*.vtu"))) == 3
+
+
+def test_a_resumed_fluid_run_is_bitwise_identical(tmp_path: Path) -> None:
+    overrides = {**COARSE, "duration": 0.06, "solver.checkpoint_every": 4}
+    whole = jellysim.run("dam-break-2d", tmp_path / "whole", overrides=overrides)
+
+    def crash(simulation: object) -> None:
+        if simulation.frame == 7:  # type: ignore[attr-defined]
+            raise KeyboardInterrupt  # a run stopped between checkpoints (frame 4 is the last)
+
+    with pytest.raises(KeyboardInterrupt):
+        jellysim.run("dam-break-2d", tmp_path / "cut", overrides=overrides, observers=[crash])
+    resumed = jellysim.run("dam-break-2d", tmp_path / "cut", overrides=overrides, resume=True)
+    with whole, resumed:
+        assert resumed.frames == whole.frames
+        for name in ("time", "fluid/position", "fluid/velocity", "fluid/pressure", "fluid/alive"):
+            np.testing.assert_array_equal(resumed.file[name][:], whole.file[name][:], name)
+
+
+def test_a_diverging_pressure_solve_exits_3_with_a_diagnosis(tmp_path: Path) -> None:
+    done = _cli(
+        "run", "dam-break-2d", "--out", str(tmp_path), "--quiet",
+        "--set", "fluid.spacing=0.01", "--set", "fluid.tolerance=1e-300",
+    )  # fmt: skip
+    assert done.returncode == 3
+    assert "iterations" in done.stderr and "residual" in done.stderr and "t = " in done.stderr
+    with jellysim.open_result(tmp_path) as r:  # the frames before stay readable
+        assert r.frames >= 1
+
+
+@pytest.mark.parametrize(
+    ("sets", "fragment"),
+    [
+        (("tentacles.count=6",), "tentacles.count"),
+        (("water.gravity=[0, 0, -9.81]",), "water.gravity"),
+        (("fluid.spacing=0.003",), "spacing"),
+    ],
+    ids=["tentacles", "gravity-2d", "off-lattice"],
+)
+def test_bad_fluid_scenes_exit_2(tmp_path: Path, sets: tuple[str, ...], fragment: str) -> None:
+    args = [a for s in sets for a in ("--set", s)]
+    done = _cli("run", "dam-break-2d", "--out", str(tmp_path / "x"), "--quiet", *args)
+    assert done.returncode == 2, done.stderr
+    assert fragment in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
