@@ -216,15 +216,15 @@ class Fluid:
     source: str = param(
         "standard",
         kind="choice",
-        choices=("standard", "mixed"),
-        doc="PPE source: number density (Koshizuka & Oka 1996) or mixed with the velocity "
-        "divergence (Tanaka & Masunaga 2010)",
+        choices=("standard",),
+        doc="PPE source: number density (Koshizuka & Oka 1996); the mixed source of Tanaka & "
+        "Masunaga (2010) is in jellysim.fluid but not yet validated for scenes",
     )
     surface: str = param(
         "standard",
         kind="choice",
-        choices=("standard", "neighbour-count"),
-        doc="free-surface detection: n < beta n0 (standard), or also by neighbour count",
+        choices=("standard",),
+        doc="free-surface detection: n < beta n0 (Koshizuka & Oka 1996)",
     )
     surface_threshold: float = param(
         0.97, gt=0.5, lt=1.0, doc="beta: a particle with n < beta n0 is on the free surface"
