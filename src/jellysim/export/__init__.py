@@ -6,11 +6,11 @@ drawn tentacles per simulated one, and returns the files a user opens first.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from pathlib import Path
 
 from jellysim.errors import InputError
+from jellysim.io.folders import output_folder
 from jellysim.io.result import Result
 
 Exporter = Callable[[Result, Path, range, "int | None"], list[Path]]
@@ -44,11 +44,5 @@ def export(
     first, stop = (0, count) if frames is None else frames
     if not 0 <= first < stop <= count:
         raise InputError(f"--frames {first}:{stop}: the result has frames 0:{count}")
-    folder = out if out is not None else result.folder / "export" / fmt
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise InputError(f"--out {folder}: cannot create the folder ({err.strerror})") from None
-    if not os.access(folder, os.W_OK):
-        raise InputError(f"--out {folder}: the folder is not writable")
+    folder = output_folder(out if out is not None else result.folder / "export" / fmt)
     return EXPORTERS[fmt](result, folder, range(first, stop, every), interpolation)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from jellysim.errors import InputError
+from jellysim.io.folders import output_folder
 from jellysim.io.result import Result
 from jellysim.progress import progress
 from jellysim.render.frame import Camera, Frame, Jellyfish, Look
@@ -402,13 +403,7 @@ def render(
     first, stop = (0, frame_count) if frames is None else frames
     if not 0 <= first < stop <= frame_count:
         raise InputError(f"--frames {first}:{stop}: the result has frames 0:{frame_count}")
-    frames_dir = out / "frames"
-    try:
-        frames_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise InputError(f"--out {out}: cannot create the folder ({err.strerror})") from None
-    if not os.access(out, os.W_OK) or not os.access(frames_dir, os.W_OK):
-        raise InputError(f"--out {out}: the folder is not writable")
+    frames_dir = output_folder(out / "frames")
     fps = float(results[0].file.attrs["fps"])
     settings = RenderSettings(
         renderer=renderer,

@@ -26,6 +26,7 @@ from jellysim.io.checkpoint import (
     save_checkpoint,
     scene_mismatch,
 )
+from jellysim.io.folders import output_folder
 from jellysim.io.result import RESULT_FILE, Result, ResultWriter, frame_datasets, read_frames
 from jellysim.progress import progress
 from jellysim.tentacle import kernels
@@ -229,18 +230,25 @@ class Simulation:
         )
 
     def attributes(self, scene_toml: str) -> dict[str, Any]:
-        from jellysim import __version__
-
         return {
-            "scene": scene_toml,
-            "version": __version__,
-            "seed": self.scene.seed,
-            "frames_expected": self.scene.frame_count,
-            "fps": self.scene.fps,
+            **result_attributes(self.scene, scene_toml),
             "tentacle_dt": self.plan.dt,
             "tentacle_substeps": self.plan.substeps,
             "bell_model": self.scene.bell.model,
         }
+
+
+def result_attributes(scene: Scene, scene_toml: str) -> dict[str, Any]:
+    """The root attributes every result carries (DESIGN §3)."""
+    from jellysim import __version__
+
+    return {
+        "scene": scene_toml,
+        "version": __version__,
+        "seed": scene.seed,
+        "frames_expected": scene.frame_count,
+        "fps": scene.fps,
+    }
 
 
 def make_simulation(scene: Scene) -> Any:
@@ -309,12 +317,7 @@ def run(
         kept = read_frames(result_path, datasets, frame + 1)
         writer = simulation.writer(result_path, scene_toml, kept)
     else:
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise InputError(f"--out {folder}: cannot create the folder ({err.strerror})") from None
-        if not os.access(folder, os.W_OK):
-            raise InputError(f"--out {folder}: the folder is not writable")
+        output_folder(folder)
         remove_checkpoint(folder)
         _write_text_atomic(folder / SCENE_FILE, scene_toml)
         writer = simulation.writer(result_path, scene_toml)

@@ -147,14 +147,10 @@ class FluidSimulation:
         ]
 
     def attributes(self, scene_toml: str) -> dict[str, Any]:
-        from jellysim import __version__
+        from jellysim.simulation import result_attributes
 
         return {
-            "scene": scene_toml,
-            "version": __version__,
-            "seed": self.scene.seed,
-            "frames_expected": self.scene.frame_count,
-            "fps": self.scene.fps,
+            **result_attributes(self.scene, scene_toml),
             "particle_spacing": self.scene.fluid.spacing,
             "fluid_particles": int(np.sum(self.solver.kind == FLUID)),
             **self.geometry,
