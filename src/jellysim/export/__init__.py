@@ -22,7 +22,19 @@ def _vtk(result: Result, out: Path, frames: range, interpolation: int | None) ->
     return export_vtk(result, out, frames, interpolation)
 
 
-EXPORTERS: dict[str, Exporter] = {"vtk": _vtk}
+def _obj(result: Result, out: Path, frames: range, interpolation: int | None) -> list[Path]:
+    from jellysim.export.meshes import export_obj
+
+    return export_obj(result, out, frames, interpolation)
+
+
+def _ply(result: Result, out: Path, frames: range, interpolation: int | None) -> list[Path]:
+    from jellysim.export.meshes import export_ply
+
+    return export_ply(result, out, frames, interpolation)
+
+
+EXPORTERS: dict[str, Exporter] = {"vtk": _vtk, "obj": _obj, "ply": _ply}
 
 
 def export(
