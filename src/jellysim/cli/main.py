@@ -106,7 +106,7 @@ def _parser() -> argparse.ArgumentParser:
 
     export = sub.add_parser("export", help="files for other tools (ParaView: vtk)")
     export.add_argument("dir", help="folder holding result.h5")
-    export.add_argument("--format", required=True, dest="fmt", help="vtk, obj or ply")
+    export.add_argument("--format", required=True, dest="fmt", help="vtk, usd, obj or ply")
     export.add_argument("--out", help="output folder (default: DIR/export/FORMAT)")
     export.add_argument("--frames", metavar="A:B", help="frames A to B-1 only")
     export.add_argument("--every", type=int, default=1, metavar="K", help="every K-th frame")

@@ -34,7 +34,19 @@ def _ply(result: Result, out: Path, frames: range, interpolation: int | None) ->
     return export_ply(result, out, frames, interpolation)
 
 
-EXPORTERS: dict[str, Exporter] = {"vtk": _vtk, "obj": _obj, "ply": _ply}
+def _usd(result: Result, out: Path, frames: range, interpolation: int | None) -> list[Path]:
+    try:
+        import pxr  # noqa: F401
+    except ImportError:
+        raise InputError(
+            "--format usd needs usd-core: pip install 'jellysim[usd]' (or pip install usd-core)"
+        ) from None
+    from jellysim.export.usd import export_usd
+
+    return export_usd(result, out, frames, interpolation)
+
+
+EXPORTERS: dict[str, Exporter] = {"vtk": _vtk, "obj": _obj, "ply": _ply, "usd": _usd}
 
 
 def export(
