@@ -87,6 +87,52 @@ def _cell_offsets(dim: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _scan_cells(
+    i: int,
+    position: np.ndarray,
+    coords: np.ndarray,
+    shape: np.ndarray,
+    stride: np.ndarray,
+    offsets: np.ndarray,
+    counts: np.ndarray,
+    members: np.ndarray,
+    radius2: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+    slot: int,
+) -> int:
+    """Particle i's neighbours closer than sqrt(radius2) in the 3^D cells around its own, in
+    cell order then member order; written from ``slot`` on into ``index`` and ``distance`` unless
+    ``slot`` is negative (count only). Returns how many there are."""
+    dim = position.shape[1]
+    found = 0
+    for o in range(offsets.shape[0]):
+        c = 0
+        inside = True
+        for k in range(dim):
+            q = coords[i, k] + offsets[o, k]
+            if q < 0 or q >= shape[k]:
+                inside = False
+            c += q * stride[k]
+        if not inside:
+            continue
+        for m in range(counts[c], counts[c + 1]):
+            j = members[m]
+            if j == i:
+                continue
+            r2 = 0.0
+            for k in range(dim):
+                d = position[j, k] - position[i, k]
+                r2 += d * d
+            if r2 < radius2:
+                if slot >= 0:
+                    index[slot + found] = j
+                    distance[slot + found] = math.sqrt(r2)
+                found += 1
+    return found
+
+
+@njit(cache=True, parallel=True)
 def neighbour_list(
     position: np.ndarray, alive: np.ndarray, radius: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -139,61 +185,24 @@ def neighbour_list(
     radius2 = radius * radius
 
     row_count = np.zeros(n + 1, dtype=np.int64)
-    for i in prange(n):
-        if cell_of[i] < 0:
-            continue
-        found = 0
-        for o in range(offsets.shape[0]):
-            c = 0
-            inside = True
-            for k in range(dim):
-                q = coords[i, k] + offsets[o, k]
-                if q < 0 or q >= shape[k]:
-                    inside = False
-                c += q * stride[k]
-            if not inside:
-                continue
-            for m in range(counts[c], counts[c + 1]):
-                j = members[m]
-                if j == i:
-                    continue
-                r2 = 0.0
-                for k in range(dim):
-                    d = position[j, k] - position[i, k]
-                    r2 += d * d
-                if r2 < radius2:
-                    found += 1
-        row_count[i + 1] = found
+    no_index = np.empty(0, dtype=np.int64)
+    no_distance = np.empty(0)
+    for i in prange(n):  # first pass: count each row
+        if cell_of[i] >= 0:
+            row_count[i + 1] = _scan_cells(
+                i, position, coords, shape, stride, offsets, counts, members, radius2,
+                no_index, no_distance, -1,
+            )  # fmt: skip
     for i in range(n):
         row_count[i + 1] += row_count[i]
     index = np.empty(row_count[n], dtype=np.int64)
     distance = np.empty(row_count[n])
-    for i in prange(n):
-        if cell_of[i] < 0:
-            continue
-        slot = row_count[i]
-        for o in range(offsets.shape[0]):
-            c = 0
-            inside = True
-            for k in range(dim):
-                q = coords[i, k] + offsets[o, k]
-                if q < 0 or q >= shape[k]:
-                    inside = False
-                c += q * stride[k]
-            if not inside:
-                continue
-            for m in range(counts[c], counts[c + 1]):
-                j = members[m]
-                if j == i:
-                    continue
-                r2 = 0.0
-                for k in range(dim):
-                    d = position[j, k] - position[i, k]
-                    r2 += d * d
-                if r2 < radius2:
-                    index[slot] = j
-                    distance[slot] = math.sqrt(r2)
-                    slot += 1
+    for i in prange(n):  # second pass: fill each row
+        if cell_of[i] >= 0:
+            _scan_cells(
+                i, position, coords, shape, stride, offsets, counts, members, radius2,
+                index, distance, row_count[i],
+            )  # fmt: skip
     return row_count, index, distance
 
 
