@@ -19,6 +19,13 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"jellysim: error: {message} (see '{self.prog} --help')\n")
 
 
+def _add_set_option(parser: argparse.ArgumentParser, metavar: str, help_text: str) -> None:
+    """The repeatable ``--set KEY=VALUE`` of the commands that take scene overrides."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar=metavar, help=help_text
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="jellysim", description="Simulate and animate jellyfish.")
     from jellysim import __version__
@@ -29,14 +36,7 @@ def _parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate a scene (preset name or TOML file)")
     run.add_argument("scene", help="preset name (see 'jellysim presets') or path to a .toml")
     run.add_argument("--out", help="output folder (default: out/<scene name>)")
-    run.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scene key, VALUE read as TOML (repeatable)",
-    )
+    _add_set_option(run, "KEY=VALUE", "override a scene key, VALUE read as TOML (repeatable)")
     run.add_argument("--resume", action="store_true", help="continue a killed run")
     run.add_argument("--force", action="store_true", help="replace an existing result")
     run.add_argument("--quiet", action="store_true", help="no progress and no messages")
@@ -51,14 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("scene", help="preset name or path to a .toml")
     sweep.add_argument("--key", required=True, help="the scene key to vary, e.g. flow.speed")
     sweep.add_argument("--values", required=True, help="comma-separated TOML values")
-    sweep.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scene key for every run",
-    )
+    _add_set_option(sweep, "KEY=VALUE", "override a scene key for every run")
     sweep.add_argument("--tentacle", type=int, default=0, help="which tentacle (default 0)")
     sweep.add_argument("--out", default="out/sweeps", help="folder for the figure and the CSV")
     sweep.add_argument("--title", default="", help="figure title")
@@ -93,13 +86,8 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--gif", action="store_true", help="also write movie.gif")
     render.add_argument("--no-video", action="store_true", help="frames only")
     render.add_argument("--jobs", type=int, help="frames rendered at once (default: the cores)")
-    render.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="look.KEY=VALUE",
-        help="override a [look] key, e.g. look.bell_color=#ff9040 (repeatable)",
+    _add_set_option(
+        render, "look.KEY=VALUE", "override a [look] key, e.g. look.bell_color=#ff9040 (repeatable)"
     )
     render.add_argument("--force", action="store_true", help="render every frame again")
     render.add_argument("--quiet", action="store_true", help="no progress")
