@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-all lint docs clean venv povray
+.PHONY: demo test test-all lint docs clean venv povray web chromium
 
 # A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
 # lives in the python3-venv package: installed here when run as root, otherwise named.
@@ -35,8 +35,37 @@ povray:
 	    echo "note: POV-Ray is not installed; run 'sudo apt-get install povray' for POV-Ray renders"; \
 	  fi; }
 
+# The web viewer's JavaScript (three.js) and the test-only validator and browser driver, pinned
+# in web/package.json and web/package-lock.json, installed from the npm registry by npm ci.
+# Node.js and npm come from Debian (packages nodejs, npm): installed here when run as root.
+web/node_modules/.installed: web/package.json web/package-lock.json
+	@command -v npm >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing Node.js and npm: apt-get install nodejs npm"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null; \
+	  else \
+	    echo "note: npm is not installed; run 'sudo apt-get install nodejs npm' for jellysim view"; \
+	    exit 0; \
+	  fi; }
+	@command -v npm >/dev/null && cd web && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed || true
+
+web: web/node_modules/.installed
+
+# Headless Chromium for the viewer's end-to-end test (Debian package chromium): installed here
+# when run as root; otherwise a note says what to run, and that test is skipped outside CI.
+chromium:
+	@command -v chromium >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing Chromium: apt-get install chromium"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get install -y -qq --no-install-recommends chromium >/dev/null; \
+	  else \
+	    echo "note: Chromium is not installed; run 'sudo apt-get install chromium' for the viewer test"; \
+	  fi; }
+
 # The main job: simulate the brown-jelly preset, draw its figures and render its movie.
-demo: $(BIN)/jellysim povray
+demo: $(BIN)/jellysim povray web
 	$(BIN)/jellysim run brown-jelly --out $(OUT)/brown-jelly --force
 	$(BIN)/jellysim plot $(OUT)/brown-jelly
 	$(BIN)/jellysim render $(OUT)/brown-jelly --force
@@ -46,11 +75,11 @@ demo: $(BIN)/jellysim povray
 	@echo "Movie:   $(OUT)/brown-jelly/render/movie.mp4"
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
-test: $(BIN)/jellysim povray
+test: $(BIN)/jellysim povray web chromium
 	$(BIN)/python -m pytest -q
 
 # Every test, slow ones included.
-test-all: $(BIN)/jellysim povray
+test-all: $(BIN)/jellysim povray web chromium
 	$(BIN)/python -m pytest -q --runslow
 
 lint: $(BIN)/jellysim
