@@ -138,9 +138,9 @@ def tube_vertices(
 def tube_faces(count: int, particles: int, sides: int = TUBE_SIDES) -> np.ndarray:
     """Triangles (M, 3) over :func:`tube_vertices`, counter-clockwise seen from outside."""
     per_chain = particles * sides + 2
-    i, s = np.meshgrid(np.arange(particles - 1), np.arange(sides), indexing="ij")
-    i, s = i.ravel(), s.ravel()
-    a, b = i * sides + s, i * sides + (s + 1) % sides  # ring i
+    ring = np.repeat(np.arange(particles - 1), sides)
+    around = np.tile(np.arange(sides), particles - 1)
+    a, b = ring * sides + around, ring * sides + (around + 1) % sides  # ring i
     c, d = a + sides, b + sides  # ring i + 1
     side = np.concatenate([np.stack([a, b, c], axis=1), np.stack([b, d, c], axis=1)])
     s = np.arange(sides)
