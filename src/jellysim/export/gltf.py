@@ -29,7 +29,7 @@ Each frame's mesh has up to three primitives, as the result has them:
 
 Materials (pbrMetallicRoughness, linear RGB as in ``[look]``, the same colours as the USD and
 POV-Ray output): the bell with base alpha ``1 - bell_transparency`` and emission ``glow`` times
-its colour; the tentacles opaque; the fluid light blue.
+its colour; the tentacles opaque; the fluid ``FLUID_COLOR`` (as rendered).
 
 Long animations are split into parts so that no file nears GLB's 4 GiB (uint32) length limit or
 a viewer's memory: ``<name>_part000.glb``, ``<name>_part001.glb``, ... each hold a contiguous run
@@ -54,10 +54,10 @@ import numpy as np
 
 from jellysim.errors import JellysimError
 from jellysim.io.result import Result
+from jellysim.render.frame import FLUID_COLOR
 
 PART_BUDGET_BYTES = 256 * 2**20  # most bytes of one .glb part (more only for a single frame)
 TUBE_SIDES = 6  # vertices around a tentacle's tube at each particle
-FLUID_COLOR = (0.6, 0.8, 1.0)  # linear RGB of fluid particles (as the POV-Ray renders)
 JSON_BYTES_PER_FRAME = 4096  # an upper bound of the JSON one frame adds to a part (tested)
 JSON_BYTES_FIXED = 8192  # an upper bound of the JSON a part holds besides its frames
 GLB_LIMIT = 2**32 - 1  # GLB stores lengths as uint32
