@@ -346,8 +346,9 @@ def _keyframes(times: np.ndarray, index: int, hold: float) -> tuple[list[float],
 
 def build_part(
     source: _Source, frames: range, every: int, part: int, parts: int
-) -> tuple[dict[str, Any], bytes]:
-    """The glTF JSON and the binary chunk of one part holding ``frames``."""
+) -> tuple[dict[str, Any], list[bytes]]:
+    """The glTF JSON and the binary chunk (in 4-byte aligned pieces) of one part holding
+    ``frames``."""
     look = source.look
     built = _Part()
     materials: list[dict[str, Any]] = []
@@ -483,27 +484,27 @@ def build_part(
     for key in ("meshes", "materials"):
         if not document[key]:
             del document[key]
-    return document, b"".join(built.chunks)
+    return document, built.chunks
 
 
-def glb_bytes(document: dict[str, Any], binary: bytes) -> list[bytes]:
-    """A GLB file's pieces in order (header, JSON chunk, binary chunk); raises JellysimError
-    when the file would exceed GLB's uint32 length."""
+def glb_bytes(document: dict[str, Any], binary: list[bytes]) -> list[bytes]:
+    """A GLB file's pieces in order (header, JSON chunk, binary chunk from ``binary``, pieces
+    of 4-byte aligned lengths); raises JellysimError when the file would exceed GLB's uint32
+    length."""
     text = _padded(json.dumps(document, separators=(",", ":")).encode("utf-8"), b" ")
-    binary_padding = b"\0" * (-len(binary) % 4)
-    total = 12 + 8 + len(text) + 8 + len(binary) + len(binary_padding)
+    binary_length = sum(len(piece) for piece in binary)
+    total = 12 + 8 + len(text) + 8 + binary_length
     if total > GLB_LIMIT:
         raise JellysimError(
-            f"one frame needs {total} bytes, more than a GLB file holds (4 GiB): "
+            f"a part needs {total} bytes, more than a GLB file holds (4 GiB): "
             "export fewer tentacles (--interpolation) or use --format usd"
         )
     return [
         struct.pack("<III", _GLB_MAGIC, _GLB_VERSION, total),
         struct.pack("<II", len(text), _CHUNK_JSON),
         text,
-        struct.pack("<II", len(binary) + len(binary_padding), _CHUNK_BIN),
-        binary,
-        binary_padding,
+        struct.pack("<II", binary_length, _CHUNK_BIN),
+        *binary,
     ]
 
 
