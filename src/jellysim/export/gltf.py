@@ -293,7 +293,7 @@ def _read(result: Result, interpolation: int | None) -> _Source:
     )
 
 
-def plan_parts(source: _Source, frames: range, budget: int) -> list[range]:
+def _plan_parts(source: _Source, frames: range, budget: int) -> list[range]:
     """Split ``frames`` into contiguous runs whose .glb stays within ``budget`` bytes (a run
     holds at least one frame). Every frame lands in exactly one run, in order."""
     fixed = 28 + JSON_BYTES_FIXED + source.shared_bytes()  # GLB header and chunk headers: 28
@@ -344,7 +344,7 @@ def _keyframes(times: np.ndarray, index: int, hold: float) -> tuple[list[float],
     return [t for t, _ in keys], [s for _, s in keys]
 
 
-def build_part(
+def _build_part(
     source: _Source, frames: range, every: int, part: int, parts: int
 ) -> tuple[dict[str, Any], list[bytes]]:
     """The glTF JSON and the binary chunk (in 4-byte aligned pieces) of one part holding
@@ -487,7 +487,7 @@ def build_part(
     return document, built.chunks
 
 
-def glb_bytes(document: dict[str, Any], binary: list[bytes]) -> list[bytes]:
+def _glb_bytes(document: dict[str, Any], binary: list[bytes]) -> list[bytes]:
     """A GLB file's pieces in order (header, JSON chunk, binary chunk from ``binary``, pieces
     of 4-byte aligned lengths); raises JellysimError when the file would exceed GLB's uint32
     length."""
@@ -527,13 +527,13 @@ def export_gltf(
     returns the parts, then the index. ``budget``: bytes per part (``PART_BUDGET_BYTES``)."""
     source = _read(result, interpolation)
     every = frames.step
-    runs = plan_parts(source, frames, PART_BUDGET_BYTES if budget is None else budget)
+    runs = _plan_parts(source, frames, PART_BUDGET_BYTES if budget is None else budget)
     paths = []
     entries = []
     for part, run in enumerate(runs):
         path = out / f"{source.name}_part{part:03d}.glb"
-        document, binary = build_part(source, run, every, part, len(runs))
-        _write(path, glb_bytes(document, binary))
+        document, binary = _build_part(source, run, every, part, len(runs))
+        _write(path, _glb_bytes(document, binary))
         paths.append(path)
         entries.append(
             {
