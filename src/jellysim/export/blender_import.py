@@ -1,7 +1,8 @@
 """Import a jellysim USD stage into Blender, ready to render.
 
 ``jellysim export DIR --format usd`` writes this script as ``import_into_blender.py`` next to the
-stage. Run it in Blender (4.0 or later; Blender's own USD importer does the geometry)::
+stage. Run it in a Blender with USD support (the official builds; Blender's own USD importer
+does the geometry)::
 
     blender --python import_into_blender.py -- brown-jelly.usdc
 
@@ -55,7 +56,8 @@ def settings_from_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
 
 
 def read_stage_settings(stage_path: str | Path) -> dict[str, Any]:
-    """Settings read from the stage's metadata with USD's ``pxr`` (Blender 4 bundles it)."""
+    """Settings read from the stage's metadata with USD's ``pxr`` (in usd-core, and in
+    Blender builds that ship USD's Python module)."""
     from pxr import Sdf
 
     layer = Sdf.Layer.FindOrOpen(str(stage_path))
