@@ -1,8 +1,11 @@
 """``jellysim export --format usd``: one stage read back with usd-core, compared with result.h5
-at several time codes, and passing USD's own validators (UsdValidation, all registered)."""
+at several time codes, and passing USD's own validators (UsdValidation, all registered); and the
+Blender script written beside it, its logic run here without Blender on the stage's metadata."""
 
 from __future__ import annotations
 
+import ast
+import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +14,7 @@ import pytest
 import jellysim
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
+from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 
 pxr = pytest.importorskip("pxr", reason="usd-core is a test dependency (pip install -e .[test])")
 from pxr import Usd, UsdGeom, UsdValidation  # noqa: E402
@@ -20,7 +24,7 @@ from pxr import Usd, UsdGeom, UsdValidation  # noqa: E402
 def stage_and_result(tmp_path_factory: pytest.TempPathFactory):
     folder = tmp_path_factory.mktemp("brown")
     result = jellysim.run("brown-jelly", folder, overrides={"duration": 0.4, "fps": 10.0})
-    (path,) = export(result, "usd", folder / "usd", interpolation=2)
+    path, _ = export(result, "usd", folder / "usd", interpolation=2)
     return Usd.Stage.Open(str(path)), result
 
 
@@ -99,7 +103,8 @@ def test_fluid_particles_are_time_sampled_points(tmp_path: Path) -> None:
         f.attrs["frames_expected"] = 2
         f.attrs["particle_spacing"] = 0.01
     with jellysim.open_result(folder) as result:
-        (path,) = export(result, "usd", tmp_path / "usd")
+        path, script = export(result, "usd", tmp_path / "usd")
+    assert script.name == "import_into_blender.py"
     stage = Usd.Stage.Open(str(path))
     points = UsdGeom.Points(stage.GetPrimAtPath("/Jellyfish/Fluid"))
     last = np.array(points.GetPointsAttr().Get(1))
@@ -107,3 +112,157 @@ def test_fluid_particles_are_time_sampled_points(tmp_path: Path) -> None:
     np.testing.assert_allclose(last[:, [0, 2]], position[1, 3:], atol=1e-6)  # 2-D: (x, 0, y)
     assert np.all(last[:, 1] == 0.0)
     assert list(points.GetWidthsAttr().Get()) == [pytest.approx(0.01)]
+
+
+# The Blender script: its logic on the exported stage, without Blender.
+
+
+def _load_script(path: Path):
+    spec = importlib.util.spec_from_file_location("import_into_blender", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def blender_export(tmp_path_factory: pytest.TempPathFactory, stage_and_result):
+    _, result = stage_and_result
+    out = tmp_path_factory.mktemp("blender")
+    stage_path, script_path = export(result, "usd", out, frames=(1, 5), every=2, interpolation=2)
+    return stage_path, script_path, _load_script(script_path), result
+
+
+def test_the_script_is_python_that_imports_bpy_only_inside_functions(blender_export) -> None:
+    _, script_path, _, _ = blender_export
+    text = script_path.read_text(encoding="utf-8")
+    compile(text, str(script_path), "exec")  # valid Python
+    tree = ast.parse(text)
+    top_level = set()
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            top_level |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            top_level.add(str(node.module).split(".")[0])
+    assert top_level <= {"__future__", "math", "sys", "pathlib", "typing"}  # no bpy, pxr, jellysim
+    inside = {
+        function.name
+        for function in ast.walk(tree)
+        if isinstance(function, ast.FunctionDef)
+        for node in ast.walk(function)
+        if isinstance(node, ast.Import) and any(a.name == "bpy" for a in node.names)
+    }
+    assert inside == {"main", "_material"}
+    with pytest.raises(ImportError):
+        import bpy  # noqa: F401  (this test environment has no Blender)
+    with pytest.raises(SystemExit, match="run this script in Blender"):
+        _load_script(script_path).main(["blender", "--", "x.usdc"])
+
+
+def test_the_script_reads_the_stage_metadata(blender_export) -> None:
+    stage_path, script_path, script, result = blender_export
+    settings = script.read_stage_settings(stage_path)
+    assert settings == script.settings_from_metadata(script.EMBEDDED_SETTINGS)  # the same copy
+    assert script.load_settings(stage_path) == settings
+    look = scene_look(result.scene)
+    np.testing.assert_allclose(settings["bell_color"], look.bell_color)
+    np.testing.assert_allclose(settings["tentacle_color"], look.tentacle_color)
+    np.testing.assert_allclose(settings["water_color"], look.water_color)
+    assert settings["bell_transparency"] == pytest.approx(look.bell_transparency)
+    assert settings["tentacle_radius"] == pytest.approx(look.tentacle_radius)
+    assert (settings["first_frame"], settings["last_frame"], settings["frame_step"]) == (1, 3, 2)
+    assert settings["fps"] == 10.0 and settings["stage_file"] == stage_path.name
+    assert script.stage_path_from_arguments(["blender", "--python", "s.py"], script_path) == (
+        stage_path.resolve()
+    )
+    assert script.stage_path_from_arguments(["b", "--", "/x/y.usdc"], script_path) == Path(
+        "/x/y.usdc"
+    )
+
+    # The bounds hold the bell and every tentacle (with its radius) at every exported frame.
+    stage = Usd.Stage.Open(str(stage_path))
+    low, high = np.array(settings["bounds_min"]), np.array(settings["bounds_max"])
+    drawn = interpolate_result(result, 2)
+    for frame in (1, 3):
+        bell = result.file["bell/surface_vertices"][frame]
+        for points in (bell, drawn[frame].reshape(-1, 3)):
+            assert np.all(points >= low - 1e-6) and np.all(points <= high + 1e-6)
+        for prim in ("Bell", "Tentacles"):
+            box = np.array(
+                UsdGeom.Boundable(stage.GetPrimAtPath(f"/Jellyfish/{prim}"))
+                .GetExtentAttr()
+                .Get(frame)
+            )
+            assert np.all(box[0] >= low - 1e-6) and np.all(box[1] <= high + 1e-6)
+    tight = np.stack([drawn[[1, 3]].reshape(-1, 3).min(0), drawn[[1, 3]].reshape(-1, 3).max(0)])
+    bell = result.file["bell/surface_vertices"][[1, 3]].reshape(-1, 3)
+    tight = np.stack([np.minimum(tight[0], bell.min(0)), np.maximum(tight[1], bell.max(0))])
+    np.testing.assert_allclose(low, tight[0], atol=look.tentacle_radius + 1e-6)
+    np.testing.assert_allclose(high, tight[1], atol=look.tentacle_radius + 1e-6)
+
+
+def _rotation_xyz(angles: list[float]) -> np.ndarray:
+    x, y, z = angles
+    rx = np.array([[1, 0, 0], [0, np.cos(x), -np.sin(x)], [0, np.sin(x), np.cos(x)]])
+    ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
+    return rz @ ry @ rx  # Blender's XYZ Euler order
+
+
+def test_the_camera_frames_the_whole_animation(blender_export) -> None:
+    stage_path, _, script, _ = blender_export
+    settings = script.read_stage_settings(stage_path)
+    low, high = settings["bounds_min"], settings["bounds_max"]
+    width, height = script.RESOLUTION
+    view = script.camera_placement(
+        low, high, settings["view_direction"], settings["field_of_view"], width / height
+    )
+    np.testing.assert_allclose(view["direction"], VIEW_DIRECTION / np.linalg.norm(VIEW_DIRECTION))
+    assert view["angle"] == pytest.approx(np.radians(FIELD_OF_VIEW))
+    rotation = _rotation_xyz(script.camera_rotation(view["direction"]))
+    forward, up = rotation @ [0.0, 0.0, -1.0], rotation @ [0.0, 1.0, 0.0]
+    np.testing.assert_allclose(forward, view["direction"], atol=1e-12)
+    assert up[2] > 0.0 and abs(np.dot(rotation @ [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])) < 1e-12
+    right = rotation @ [1.0, 0.0, 0.0]
+    half_width = np.tan(view["angle"] / 2.0)
+    half_height = half_width * height / width
+    corners = np.array(
+        [[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])]
+    )
+    for corner in corners:
+        offset = corner - np.array(view["location"])
+        depth = offset @ forward
+        assert view["clip_start"] < depth < view["clip_end"]
+        assert abs(offset @ right) / depth < half_width
+        assert abs(offset @ up) / depth < half_height
+
+
+def test_materials_lights_and_render_settings(blender_export) -> None:
+    stage_path, _, script, result = blender_export
+    settings = script.read_stage_settings(stage_path)
+    look = scene_look(result.scene)
+    materials = script.material_parameters(settings)
+    np.testing.assert_allclose(materials["Bell"]["base_color"], [*look.bell_color, 1.0])
+    assert materials["Bell"]["alpha"] == pytest.approx(1.0 - look.bell_transparency)
+    assert materials["Bell"]["emission_strength"] == pytest.approx(look.glow)
+    assert materials["Bell"]["blend"] and not materials["Tentacles"]["blend"]
+    np.testing.assert_allclose(materials["Tentacles"]["base_color"], [*look.tentacle_color, 1.0])
+    np.testing.assert_allclose(materials["World"]["color"], [*look.water_color, 1.0])
+
+    frame = script.render_settings(settings)
+    assert (frame["frame_start"], frame["frame_end"], frame["frame_step"]) == (1, 3, 2)
+    assert frame["fps"] / frame["fps_base"] == pytest.approx(10.0)
+    assert (frame["resolution_x"], frame["resolution_y"]) == script.RESOLUTION
+    ntsc = script.render_settings({**settings, "fps": 30000 / 1001})
+    assert (ntsc["fps"], ntsc["fps"] / ntsc["fps_base"]) == (30, pytest.approx(29.97, abs=1e-3))
+
+    centre = (np.array(settings["bounds_min"]) + settings["bounds_max"]) / 2.0
+    for light in script.light_rig(settings["bounds_min"], settings["bounds_max"]):
+        assert light["energy"] > 0.0
+        aim = _rotation_xyz(light["rotation"]) @ [0.0, 0.0, -1.0]  # lights shine along local -z
+        if light["type"] == "AREA":
+            to_centre = centre - light["location"]
+            np.testing.assert_allclose(aim, to_centre / np.linalg.norm(to_centre), atol=1e-12)
+        else:
+            assert aim[2] < 0.0  # the sun shines downwards
+    assert script.curve_bevel_depth(1.0, 0.002) == 0.002  # radii not imported: the bevel's
+    assert script.curve_bevel_depth(0.002, 0.002) == 1.0  # radii imported in metres

@@ -92,9 +92,11 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--force", action="store_true", help="render every frame again")
     render.add_argument("--quiet", action="store_true", help="no progress")
 
-    export = sub.add_parser("export", help="files for other tools: vtk (ParaView), usd, obj, ply")
+    export = sub.add_parser(
+        "export", help="files for other tools: vtk (ParaView), usd, gltf, obj, ply"
+    )
     export.add_argument("dir", help="folder holding result.h5")
-    export.add_argument("--format", required=True, dest="fmt", help="vtk, usd, obj or ply")
+    export.add_argument("--format", required=True, dest="fmt", help="vtk, usd, gltf, obj or ply")
     export.add_argument("--out", help="output folder (default: DIR/export/FORMAT)")
     export.add_argument("--frames", metavar="A:B", help="frames A to B-1 only")
     export.add_argument("--every", type=int, default=1, metavar="K", help="every K-th frame")

@@ -46,7 +46,19 @@ def _usd(result: Result, out: Path, frames: range, interpolation: int | None) ->
     return export_usd(result, out, frames, interpolation)
 
 
-EXPORTERS: dict[str, Exporter] = {"vtk": _vtk, "obj": _obj, "ply": _ply, "usd": _usd}
+def _gltf(result: Result, out: Path, frames: range, interpolation: int | None) -> list[Path]:
+    from jellysim.export.gltf import export_gltf
+
+    return export_gltf(result, out, frames, interpolation)
+
+
+EXPORTERS: dict[str, Exporter] = {
+    "vtk": _vtk,
+    "obj": _obj,
+    "ply": _ply,
+    "usd": _usd,
+    "gltf": _gltf,
+}
 
 
 def export(

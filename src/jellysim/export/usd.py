@@ -9,19 +9,28 @@ them:
 - ``Tentacles``: ``BasisCurves`` (linear), one curve per drawn tentacle, time-sampled ``points``
   and ``extent``, ``widths`` per vertex tapering from root to tip (the scene's ``[look]``);
 - ``Fluid``: ``Points``, the live fluid particles per time sample, constant width l0.
+
+The root layer's ``customLayerData["jellysim"]`` holds what a renderer needs besides geometry:
+the scene's ``[look]`` colours, the exported frames (first, last, step) and fps, the bounding
+box of everything over those frames, and the renderers' camera direction and field of view.
+``OUT/import_into_blender.py`` (the module :mod:`jellysim.export.blender_import`, with those
+settings embedded) sets the stage up in Blender: materials, world, camera, lights, frame range.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from jellysim.io.result import Result
 
 
-def _extent(points: np.ndarray) -> list[tuple[float, float, float]]:
-    low, high = points.min(axis=0), points.max(axis=0)
+def _extent(points: np.ndarray, pad: float = 0.0) -> list[tuple[float, float, float]]:
+    """Corners of the box around ``points`` (K, 3), grown by ``pad`` on every side."""
+    low, high = points.min(axis=0) - pad, points.max(axis=0) + pad
     return [tuple(map(float, low)), tuple(map(float, high))]  # type: ignore[list-item]
 
 
@@ -31,6 +40,65 @@ def _to_3d(points: np.ndarray) -> np.ndarray:
     world = np.zeros((*points.shape[:-1], 3))
     world[..., 0], world[..., 2] = points[..., 0], points[..., 1]  # 2-D (x, y up) -> (x, 0, y)
     return world
+
+
+BLENDER_SCRIPT = "import_into_blender.py"
+
+
+def _bounds(low: np.ndarray, high: np.ndarray, box: list[tuple[float, float, float]]) -> None:
+    """Grow ``low`` and ``high`` (3,) in place to hold ``box`` (an extent)."""
+    np.minimum(low, box[0], out=low)
+    np.maximum(high, box[1], out=high)
+
+
+def stage_settings(
+    scene: Any, frames: range, fps: float, low: np.ndarray, high: np.ndarray, stage_file: str
+) -> dict[str, Any]:
+    """The settings written into the stage's metadata and the Blender script (plain values)."""
+    from jellysim import __version__
+    from jellysim.render.frame import FLUID_COLOR
+    from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
+
+    look = scene_look(scene)
+    return {
+        "generator": f"jellysim {__version__}",
+        "scene": scene.name,
+        "stage_file": stage_file,
+        "first_frame": frames[0],
+        "last_frame": frames[-1],
+        "frame_step": frames.step,
+        "fps": fps,
+        "bounds_min": [float(v) for v in low],
+        "bounds_max": [float(v) for v in high],
+        "bell_color": [float(v) for v in look.bell_color],
+        "bell_transparency": float(look.bell_transparency),
+        "glow": float(look.glow),
+        "tentacle_color": [float(v) for v in look.tentacle_color],
+        "tentacle_radius": float(look.tentacle_radius),
+        "water_color": [float(v) for v in look.water_color],
+        "fluid_color": [float(v) for v in FLUID_COLOR],
+        "view_direction": [float(v) for v in VIEW_DIRECTION],
+        "field_of_view": float(FIELD_OF_VIEW),
+    }
+
+
+def write_blender_script(path: Path, settings: dict[str, Any]) -> Path:
+    """``import_into_blender.py``: the module :mod:`jellysim.export.blender_import` with
+    ``settings`` embedded (written to a temporary name, then renamed)."""
+    import pprint
+
+    from jellysim.export import blender_import
+
+    source = Path(blender_import.__file__).read_text(encoding="utf-8")
+    marker = "EMBEDDED_SETTINGS: dict[str, Any] | None = None"
+    assert source.count(marker) == 1
+    embedded = "EMBEDDED_SETTINGS: dict[str, Any] | None = " + pprint.pformat(
+        settings, sort_dicts=False, width=96
+    )
+    temporary = path.with_name(f".{path.name}.tmp")
+    temporary.write_text(source.replace(marker, embedded), encoding="utf-8")
+    os.replace(temporary, path)
+    return path
 
 
 def export_usd(
@@ -53,6 +121,7 @@ def export_usd(
     stage.SetStartTimeCode(frames[0])
     stage.SetEndTimeCode(frames[-1])
     stage.SetTimeCodesPerSecond(float(f.attrs["fps"]))
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)  # everything over the frames, m
 
     if "bell/surface_vertices" in f:
         bell = UsdGeom.Mesh.Define(stage, "/Jellyfish/Bell")
@@ -67,7 +136,9 @@ def export_usd(
         for frame in frames:
             points = np.asarray(f["bell/surface_vertices"][frame], dtype=np.float32)
             points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
-            extent_attr.Set(Vt.Vec3fArray(_extent(points)), frame)
+            box = _extent(points)
+            extent_attr.Set(Vt.Vec3fArray(box), frame)
+            _bounds(low, high, box)
 
     if "tentacles/position" in f:
         from jellysim.interpolation import interpolate_result
@@ -87,12 +158,9 @@ def export_usd(
         for frame in frames:
             points = drawn[frame].reshape(-1, 3).astype(np.float32)
             points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
-            box = _extent(points)
-            pad = float(widths.max()) / 2.0
-            extent_attr.Set(
-                Vt.Vec3fArray([tuple(v - pad for v in box[0]), tuple(v + pad for v in box[1])]),
-                frame,
-            )
+            box = _extent(points, float(widths.max()) / 2.0)
+            extent_attr.Set(Vt.Vec3fArray(box), frame)
+            _bounds(low, high, box)
 
     if "fluid/position" in f:
         cloud = UsdGeom.Points.Define(stage, "/Jellyfish/Fluid")
@@ -104,14 +172,18 @@ def export_usd(
             alive = np.asarray(f["fluid/alive"][frame], dtype=bool)
             points = _to_3d(np.asarray(f["fluid/position"][frame])[alive]).astype(np.float32)
             points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
-            box = _extent(points)
-            pad = spacing / 2.0
-            extent_attr.Set(
-                Vt.Vec3fArray([tuple(v - pad for v in box[0]), tuple(v + pad for v in box[1])]),
-                frame,
-            )
+            box = _extent(points, spacing / 2.0)
+            extent_attr.Set(Vt.Vec3fArray(box), frame)
+            _bounds(low, high, box)
 
+    settings = stage_settings(scene, frames, float(f.attrs["fps"]), low, high, path.name)
+    stage.GetRootLayer().customLayerData = {
+        "jellysim": {
+            key: Vt.DoubleArray(value) if isinstance(value, list) else value
+            for key, value in settings.items()
+        }
+    }
     stage.GetRootLayer().Export(str(path))  # written whole, then visible under its name
     del stage
     temporary.unlink(missing_ok=True)
-    return [path]
+    return [path, write_blender_script(out / BLENDER_SCRIPT, settings)]

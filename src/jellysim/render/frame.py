@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 RGB = tuple[float, float, float]
+FLUID_COLOR: RGB = (0.6, 0.8, 1.0)  # fluid particles, linear RGB (every renderer and export)
 
 
 @dataclass(frozen=True)

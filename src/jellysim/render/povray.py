@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from jellysim.render.frame import (
+    FLUID_COLOR,
     Camera,
     Frame,
     Jellyfish,
@@ -161,7 +162,8 @@ def fluid_block(frame: Frame, style: str) -> str:
     if frame.fluid is None or frame.fluid.size == 0:
         return ""
     radius = frame.fluid_radius
-    color = "texture { pigment { rgbt <0.6,0.8,1.0,0.6> } finish { specular 0.5 } }"
+    red, green, blue = FLUID_COLOR
+    color = f"texture {{ pigment {{ rgbt <{red},{green},{blue},0.6> }} finish {{ specular 0.5 }} }}"
     if style == "surface":
         body = "".join(f"sphere{{{vec(p)},{2.0 * radius:.4g},1}}" for p in frame.fluid)
         return f"blob {{ threshold 0.6 {body} {color} }}\n"
