@@ -50,8 +50,9 @@ async function check(browser, url, index) {
   await page.waitForFunction((f) => window.jellysimView.frame !== f, first, { timeout: TIMEOUT });
   await sleep(300);
   const after = await canvas.screenshot();
-  observed.advanced = [first, await hook(page, "frame")];
-  assert.ok(!before.equals(after), "the canvas did not change while playing");
+  observed.advanced = true;
+  observed.pixelsChanged = !before.equals(after);
+  assert.ok(observed.pixelsChanged, "the canvas did not change while playing");
 
   // Pause with the space bar: the frame stays put. Play and pause again with the button.
   await page.keyboard.press("Space");

@@ -59,7 +59,9 @@ def find_web_modules() -> Path:
     """The ``node_modules`` folder holding three.js: ``$JELLYSIM_WEB_MODULES``, else
     ``web/node_modules`` of the repository this package was installed from (editable)."""
     setting = os.environ.get(WEB_MODULES_ENV)
-    folder = Path(setting) if setting else Path(__file__).resolve().parents[3] / "web" / "node_modules"
+    folder = (
+        Path(setting) if setting else Path(__file__).resolve().parents[3] / "web" / "node_modules"
+    )
     if all((folder / part).is_file() for part in THREE_FILES.values()):
         return folder
     if setting:
@@ -226,9 +228,7 @@ class ResultData:
                 raise LookupError("the result has no tentacles")
             factor = self.interpolation if interpolation is None else interpolation
             if not 1 <= factor <= self.max_interpolation:
-                raise ValueError(
-                    f"interpolation={factor}: expected 1 to {self.max_interpolation}"
-                )
+                raise ValueError(f"interpolation={factor}: expected 1 to {self.max_interpolation}")
             from jellysim.interpolation import interpolate_result
 
             data = interpolate_result(self.result, factor, frames=(start, stop))
@@ -270,11 +270,13 @@ class ViewServer(ThreadingHTTPServer):
             super().__init__((host, port), _Handler)
         except (OSError, OverflowError) as err:
             reason = getattr(err, "strerror", None) or str(err)
-            raise InputError(f"--host {host} --port {port}: cannot listen there ({reason})") from None
+            raise InputError(
+                f"--host {host} --port {port}: cannot listen there ({reason})"
+            ) from None
 
     @property
     def url(self) -> str:
-        host, port = self.server_address[:2]
+        host, port = str(self.server_address[0]), int(self.server_address[1])
         if ipaddress.ip_address(host).is_unspecified:
             host = socket.gethostname()
         elif ":" in str(host):
