@@ -85,7 +85,10 @@ function tentacleGeometry(count, particles) {
   return geometry;
 }
 
-function makeFluid(meta, kinds) {
+// Points as large as the particles (diameter 2 radius): three.js scales an attenuated point's
+// size by half the viewport height over the depth, which is 1 / (2 tan(fov / 2)) of the
+// perspective projection's scale.
+function makeFluid(meta, kinds, fov) {
   const count = meta.fluid.particles;
   const geometry = new THREE.BufferGeometry();
   const positions = new THREE.BufferAttribute(new Float32Array(count * 3), 3);
@@ -95,10 +98,19 @@ function makeFluid(meta, kinds) {
   geometry.setAttribute("position", positions);
   geometry.setAttribute("color", colors);
   const palette = KIND_COLORS.map((rgb) => linear(rgb));
+  const disc = document.createElement("canvas"); // round points: a white disc as alpha mask
+  disc.width = disc.height = 64;
+  const pen = disc.getContext("2d");
+  pen.fillStyle = "#fff";
+  pen.beginPath();
+  pen.arc(32, 32, 31, 0, 2 * Math.PI);
+  pen.fill();
   const material = new THREE.PointsMaterial({
-    size: 2 * meta.fluid.radius,
+    size: (2 * meta.fluid.radius) / Math.tan(THREE.MathUtils.degToRad(fov) / 2),
     sizeAttenuation: true,
     vertexColors: true,
+    map: new THREE.CanvasTexture(disc),
+    alphaTest: 0.5,
   });
   const points = new THREE.Points(geometry, material);
   points.frustumCulled = false;
@@ -144,7 +156,7 @@ async function main() {
   );
   tentacles.frustumCulled = false;
   scene.add(tentacles);
-  const fluid = meta.fluid.present ? makeFluid(meta, kinds) : null;
+  const fluid = meta.fluid.present ? makeFluid(meta, kinds, camera.fov) : null;
   if (fluid) scene.add(fluid);
 
   // Controls: shown only for what the result has.
@@ -162,6 +174,7 @@ async function main() {
 
   // Camera framing: the whole animation's box, or (following) one frame's size about the centre.
   let centre = null; // the jellyfish's centre in the frame drawn
+  let drawn = null; // the data of the frame drawn
   function frameBox(low, high) {
     const middle = low.clone().add(high).multiplyScalar(0.5);
     const radius = Math.max(0.5 * high.clone().sub(low).length(), 1e-6);
@@ -176,9 +189,17 @@ async function main() {
     controls.update();
   }
   function reframe() {
-    if ($("follow").checked && centre) {
+    if ($("follow").checked && drawn) {
+      // A cube as large as the largest frame's box, about the middle of this frame's box.
+      const box = new THREE.Box3();
+      for (const array of Object.values(drawn)) {
+        for (let i = 0; i < array.length; i += 3) {
+          if (!Number.isNaN(array[i])) box.expandByPoint(new THREE.Vector3(array[i], array[i + 1], array[i + 2]));
+        }
+      }
+      const middle = box.getCenter(new THREE.Vector3());
       const half = new THREE.Vector3().setScalar(0.5 * meta.extent);
-      frameBox(centre.clone().sub(half), centre.clone().add(half));
+      frameBox(middle.clone().sub(half), middle.clone().add(half));
     } else {
       frameBox(new THREE.Vector3(...meta.bounds[0]), new THREE.Vector3(...meta.bounds[1]));
     }
@@ -255,6 +276,7 @@ async function main() {
       controls.target.add(shift);
     }
     centre = next;
+    drawn = data;
 
     state.frame = frame;
     if (!scrubbing) scrub.value = String(frame);
