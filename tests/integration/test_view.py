@@ -286,7 +286,9 @@ def test_bad_input_exits_2_with_one_line(
     assert "three.js not found" in _exit_2(capsys, str(brown.folder))
 
 
-def test_missing_three_js_says_to_run_make_web(tmp_path: Path, monkeypatch) -> None:
+def test_missing_three_js_says_to_run_make_web(
+    brown: jellysim.Result, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
+) -> None:
     import jellysim.view.server as server
 
     modules = tmp_path / "node_modules"
@@ -299,6 +301,7 @@ def test_missing_three_js_says_to_run_make_web(tmp_path: Path, monkeypatch) -> N
     monkeypatch.setattr(server, "__file__", str(tmp_path / "src" / "jellysim" / "view" / "x.py"))
     with pytest.raises(InputError, match=r"make web.*npm ci"):
         find_web_modules()
+    assert "run 'make web'" in _exit_2(capsys, str(brown.folder))
 
 
 def test_ctrl_c_stops_the_server_with_exit_0(brown: jellysim.Result) -> None:

@@ -395,8 +395,8 @@ def serve(
     if not 0 <= port <= 65535:
         raise InputError(f"--port {port}: expected 0 (a free port) to 65535")
     with open_result(folder) as result:
-        data = ResultData(result)
-        server = ViewServer(data, find_web_modules(), host, port)
+        web_modules = find_web_modules()
+        server = ViewServer(ResultData(result), web_modules, host, port)
         try:
             url = server.url
             print(f"jellysim view: serving {folder} at {url} (Ctrl-C to stop)", flush=True)

@@ -301,12 +301,14 @@ async function main() {
     event.currentTarget.blur(); // the space bar stays with the page
   });
   document.addEventListener("keydown", (event) => {
-    if (event.code !== "Space" || event.target.tagName === "SELECT") return;
+    // Space plays and pauses, except where it works a control: a checkbox, the speed menu.
+    if (event.code !== "Space" || event.target.matches("select, input[type=checkbox]")) return;
     event.preventDefault();
     setPlaying(!state.playing);
   });
   scrub.addEventListener("pointerdown", () => { scrubbing = true; });
-  scrub.addEventListener("pointerup", () => { scrubbing = false; });
+  window.addEventListener("pointerup", () => { scrubbing = false; }); // released anywhere
+  window.addEventListener("pointercancel", () => { scrubbing = false; });
   scrub.addEventListener("input", () => { state.position = Number(scrub.value); });
   $("speed").addEventListener("change", (event) => { state.speed = Number(event.target.value); });
   $("bell").addEventListener("change", (event) => { if (bell) bell.visible = event.target.checked; });
