@@ -29,6 +29,18 @@ def test_cosine_weights_as_data():
     assert cosine_weight(0.5) == pytest.approx(0.5, abs=1e-15)
 
 
+def test_a_window_of_frames_equals_the_slice_of_the_whole(brown):
+    whole = interpolate_result(brown, 3)
+    period = brown.scene.bell.period
+    fps = brown.file.attrs["fps"]
+    assert 0.25 * period * fps > 2  # the lag reaches several frames back
+    for start, stop in ((0, 4), (1, 2), (17, 40), (whole.shape[0] - 5, whole.shape[0])):
+        window = interpolate_result(brown, 3, frames=(start, stop))
+        np.testing.assert_allclose(window, whole[start:stop], rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="outside"):
+        interpolate_result(brown, 3, frames=(5, 5))
+
+
 def test_margin_point_walks_the_polyline():
     angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     square = np.stack([np.cos(angles), np.sin(angles), np.zeros(12)], axis=1)

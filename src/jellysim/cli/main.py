@@ -104,6 +104,16 @@ def _parser() -> argparse.ArgumentParser:
         "--interpolation", type=int, metavar="N", help="drawn tentacles per simulated one"
     )
 
+    view = sub.add_parser("view", help="play a result in the web browser (a local web page)")
+    view.add_argument("dir", help="folder holding result.h5")
+    view.add_argument("--port", type=int, default=0, help="port to listen on (default: a free one)")
+    view.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to listen on (default 127.0.0.1: this machine only; docs/viewer.md)",
+    )
+    view.add_argument("--no-browser", action="store_true", help="only print the address")
+
     sub.add_parser("presets", help="list the presets")
     show = sub.add_parser("show", help="print a preset's TOML")
     show.add_argument("name")
@@ -239,6 +249,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_view(args: argparse.Namespace) -> int:
+    from jellysim.view import serve
+
+    return serve(args.dir, host=args.host, port=args.port, browser=not args.no_browser)
+
+
 def _cmd_presets(args: argparse.Namespace) -> int:
     from jellysim.species import preset_names, preset_summary
 
@@ -268,6 +284,7 @@ COMMANDS = {
     "sweep": _cmd_sweep,
     "render": _cmd_render,
     "export": _cmd_export,
+    "view": _cmd_view,
     "presets": _cmd_presets,
     "show": _cmd_show,
 }

@@ -175,21 +175,35 @@ def pulse_period(scene: object) -> float:
 
 
 def interpolate_result(
-    result: object, factor: int | None = None, lag: float | None = None
+    result: object,
+    factor: int | None = None,
+    lag: float | None = None,
+    frames: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """Drawn tentacles (F, T * factor, P, 3) of an open result.
 
     ``factor`` defaults to the scene's ``tentacles.interpolation``; ``lag`` (s) to a quarter of
-    the pulse period (0 turns the anti-banding lag off).
+    the pulse period (0 turns the anti-banding lag off). ``frames`` = (start, stop) gives only
+    those frames, (stop - start, T * factor, P, 3), equal to the slice of the whole: it reads
+    the frames from ``lag`` before ``start`` on, which the lagged shapes need, and no others.
     """
     scene = result.scene  # type: ignore[attr-defined]
     factor = scene.tentacles.interpolation if factor is None else factor
     lag = LAG_FRACTION_OF_PULSE * pulse_period(scene) if lag is None else lag
-    return interpolate_tentacles(
-        result.tentacle_positions,  # type: ignore[attr-defined]
-        result.margin,  # type: ignore[attr-defined]
-        result.time,  # type: ignore[attr-defined]
+    file = result.file  # type: ignore[attr-defined]
+    times = np.asarray(file["time"][:], dtype=np.float64)
+    start, stop = (0, times.shape[0]) if frames is None else frames
+    if not 0 <= start < stop <= times.shape[0]:
+        raise ValueError(f"frames {start}:{stop} outside 0:{times.shape[0]}")
+    # The earliest frame a lagged shape of frame `start` reads (interpolate_tentacles holds the
+    # shapes at the first frame before that, so the window must begin at or before it).
+    first = max(0, int(np.searchsorted(times, times[start] - max(lag, 0.0), side="right")) - 1)
+    drawn = interpolate_tentacles(
+        np.asarray(file["tentacles/position"][first:stop], dtype=np.float64),
+        np.asarray(file["bell/margin"][first:stop], dtype=np.float64),
+        times[first:stop],
         factor,
         scene.tentacles.spacing,
         lag_spread=lag,
     )
+    return drawn[start - first :]

@@ -1,0 +1,368 @@
+// `jellysim view`: plays a result with three.js (docs/viewer.md). World coordinates are the
+// result's: SI units, z up (the camera's up is +z); a 2-D fluid arrives as (x, 0, y).
+
+import * as THREE from "three";
+import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { CHUNK, FrameStore, fetchBellFaces, fetchFluidKinds, fetchMeta } from "./data.js";
+
+const VIEW_DIRECTION = new THREE.Vector3(0, 1, -0.25).normalize(); // as jellysim render's camera
+const KIND_COLORS = [
+  [0.25, 0.55, 0.95], // fluid
+  [0.45, 0.45, 0.45], // wall
+  [0.22, 0.22, 0.22], // dummy
+];
+
+const $ = (id) => document.getElementById(id);
+
+// What the page shows; read (never written) by tests through window.jellysimView.
+const state = {
+  ready: false, // the first frame is drawn
+  frame: -1, // the frame drawn
+  position: 0, // playback position in frames (fractional)
+  playing: true,
+  speed: 1,
+  interpolation: 1,
+  drawnTentacles: 0,
+  fluidPoints: 0, // fluid particles drawn (0 while hidden)
+  error: null,
+};
+
+// The documented test hook (docs/viewer.md, "Test hook"): read-only getters.
+window.jellysimView = Object.freeze({
+  get ready() { return state.ready; },
+  get frame() { return state.frame; },
+  get playing() { return state.playing; },
+  get speed() { return state.speed; },
+  get interpolation() { return state.interpolation; },
+  get drawnTentacles() { return state.drawnTentacles; },
+  get fluidPoints() { return state.fluidPoints; },
+  get error() { return state.error; },
+});
+
+function showError(error) {
+  state.error = String(error.message ?? error);
+  $("status").textContent = state.error;
+  $("status").classList.add("error");
+  console.error(`jellysim view: ${state.error}`);
+}
+
+const linear = (rgb) => new THREE.Color().setRGB(rgb[0], rgb[1], rgb[2], THREE.LinearSRGBColorSpace);
+
+function makeBell(meta, faces) {
+  const geometry = new THREE.BufferGeometry();
+  const positions = new THREE.BufferAttribute(new Float32Array(meta.bell.vertices * 3), 3);
+  positions.setUsage(THREE.DynamicDrawUsage);
+  geometry.setAttribute("position", positions);
+  geometry.setIndex(new THREE.BufferAttribute(faces, 1));
+  const material = new THREE.MeshPhongMaterial({
+    color: linear(meta.look.bell_color),
+    transparent: true,
+    opacity: 1 - meta.look.bell_transparency,
+    side: THREE.DoubleSide,
+    depthWrite: false,
+    shininess: 40,
+  });
+  const mesh = new THREE.Mesh(geometry, material);
+  mesh.frustumCulled = false;
+  return mesh;
+}
+
+// Line segments along every drawn tentacle, rebuilt when the drawn count changes.
+function tentacleGeometry(count, particles) {
+  const geometry = new THREE.BufferGeometry();
+  const positions = new THREE.BufferAttribute(new Float32Array(count * particles * 3), 3);
+  positions.setUsage(THREE.DynamicDrawUsage);
+  geometry.setAttribute("position", positions);
+  const index = new Uint32Array(count * (particles - 1) * 2);
+  let k = 0;
+  for (let t = 0; t < count; t++) {
+    for (let p = 0; p < particles - 1; p++) {
+      index[k++] = t * particles + p;
+      index[k++] = t * particles + p + 1;
+    }
+  }
+  geometry.setIndex(new THREE.BufferAttribute(index, 1));
+  return geometry;
+}
+
+// Points as large as the particles (diameter 2 radius): three.js scales an attenuated point's
+// size by half the viewport height over the depth, which is 1 / (2 tan(fov / 2)) of the
+// perspective projection's scale.
+function makeFluid(meta, kinds, fov) {
+  const count = meta.fluid.particles;
+  const geometry = new THREE.BufferGeometry();
+  const positions = new THREE.BufferAttribute(new Float32Array(count * 3), 3);
+  const colors = new THREE.BufferAttribute(new Float32Array(count * 3), 3);
+  positions.setUsage(THREE.DynamicDrawUsage);
+  colors.setUsage(THREE.DynamicDrawUsage);
+  geometry.setAttribute("position", positions);
+  geometry.setAttribute("color", colors);
+  const palette = KIND_COLORS.map((rgb) => linear(rgb));
+  const disc = document.createElement("canvas"); // round points: a white disc as alpha mask
+  disc.width = disc.height = 64;
+  const pen = disc.getContext("2d");
+  pen.fillStyle = "#fff";
+  pen.beginPath();
+  pen.arc(32, 32, 31, 0, 2 * Math.PI);
+  pen.fill();
+  const material = new THREE.PointsMaterial({
+    size: (2 * meta.fluid.radius) / Math.tan(THREE.MathUtils.degToRad(fov) / 2),
+    sizeAttenuation: true,
+    vertexColors: true,
+    map: new THREE.CanvasTexture(disc),
+    alphaTest: 0.5,
+  });
+  const points = new THREE.Points(geometry, material);
+  points.frustumCulled = false;
+  points.userData.kindColors = (i) => palette[Math.min(kinds[i], palette.length - 1)];
+  return points;
+}
+
+async function main() {
+  const meta = await fetchMeta();
+  const store = new FrameStore(meta);
+  store.onError = showError;
+  const [faces, kinds] = await Promise.all([
+    meta.bell.present ? fetchBellFaces() : null,
+    meta.fluid.present ? fetchFluidKinds() : null,
+  ]);
+  document.title = `${meta.name} · jellysim view`;
+
+  const renderer = new THREE.WebGLRenderer({ antialias: true });
+  renderer.setPixelRatio(window.devicePixelRatio);
+  renderer.setSize(window.innerWidth, window.innerHeight);
+  $("view").appendChild(renderer.domElement);
+
+  const scene = new THREE.Scene();
+  scene.background = linear(meta.look.water_color);
+  const camera = new THREE.PerspectiveCamera(40, window.innerWidth / window.innerHeight, 1e-3, 1e3);
+  camera.up.set(0, 0, 1); // z up (DESIGN §3); OrbitControls orbits about camera.up
+  const controls = new OrbitControls(camera, renderer.domElement);
+  controls.enableDamping = true;
+  const sky = new THREE.HemisphereLight(0xdfefff, 0x203040, 1.6);
+  sky.position.set(0, 0, 1);
+  scene.add(sky);
+  const headlight = new THREE.DirectionalLight(0xffffff, 1.6); // moves with the camera
+  headlight.position.set(0.4, 0.6, 0);
+  camera.add(headlight, headlight.target);
+  headlight.target.position.set(0, 0, -1);
+  scene.add(camera);
+
+  const bell = meta.bell.present ? makeBell(meta, faces) : null;
+  if (bell) scene.add(bell);
+  const tentacles = new THREE.LineSegments(
+    new THREE.BufferGeometry(),
+    new THREE.LineBasicMaterial({ color: linear(meta.look.tentacle_color) }),
+  );
+  tentacles.frustumCulled = false;
+  scene.add(tentacles);
+  const fluid = meta.fluid.present ? makeFluid(meta, kinds, camera.fov) : null;
+  if (fluid) scene.add(fluid);
+
+  // Controls: shown only for what the result has.
+  $("bell-toggle").hidden = !bell;
+  $("fluid-toggle").hidden = !fluid;
+  $("interpolation-control").hidden = !meta.tentacles.present;
+  const scrub = $("scrub");
+  scrub.max = String(meta.frames - 1);
+  const slider = $("interpolation");
+  slider.max = String(meta.tentacles.max_interpolation);
+  slider.value = String(meta.tentacles.interpolation);
+  $("interpolation-value").textContent = slider.value;
+  state.interpolation = meta.tentacles.interpolation;
+  $("follow").checked = meta.travels;
+
+  // Camera framing: the whole animation's box, or (following) one frame's size about the centre.
+  let centre = null; // the jellyfish's centre in the frame drawn
+  let drawn = null; // the data of the frame drawn
+  function frameBox(low, high) {
+    const middle = low.clone().add(high).multiplyScalar(0.5);
+    const radius = Math.max(0.5 * high.clone().sub(low).length(), 1e-6);
+    const vertical = THREE.MathUtils.degToRad(camera.fov);
+    const horizontal = 2 * Math.atan(Math.tan(vertical / 2) * camera.aspect);
+    const distance = (1.05 * radius) / Math.sin(Math.min(vertical, horizontal) / 2);
+    camera.position.copy(middle).addScaledVector(VIEW_DIRECTION, -distance);
+    camera.near = distance / 100;
+    camera.far = 10 * (distance + radius);
+    camera.updateProjectionMatrix();
+    controls.target.copy(middle);
+    controls.update();
+  }
+  function reframe() {
+    if ($("follow").checked && drawn) {
+      // A cube as large as the largest frame's box, about the middle of this frame's box.
+      const box = new THREE.Box3();
+      for (const array of Object.values(drawn)) {
+        for (let i = 0; i < array.length; i += 3) {
+          if (!Number.isNaN(array[i])) box.expandByPoint(new THREE.Vector3(array[i], array[i + 1], array[i + 2]));
+        }
+      }
+      const middle = box.getCenter(new THREE.Vector3());
+      const half = new THREE.Vector3().setScalar(0.5 * meta.extent);
+      frameBox(middle.clone().sub(half), middle.clone().add(half));
+    } else {
+      frameBox(new THREE.Vector3(...meta.bounds[0]), new THREE.Vector3(...meta.bounds[1]));
+    }
+  }
+
+  // The data of one frame, or null while some of it loads (then it is requested).
+  function dataFor(frame) {
+    const data = {};
+    for (const part of ["bell", "tentacles", "fluid"]) {
+      if (!meta[part].present || (part === "fluid" && !fluid.visible)) continue;
+      data[part] = store.get(part, frame, state.interpolation);
+      if (data[part] === null) return null;
+    }
+    return data;
+  }
+
+  function meanOf(array, stride, count) {
+    const sum = new THREE.Vector3();
+    for (let i = 0; i < count; i++) {
+      sum.x += array[i * stride];
+      sum.y += array[i * stride + 1];
+      sum.z += array[i * stride + 2];
+    }
+    return sum.divideScalar(Math.max(count, 1));
+  }
+
+  function draw(frame, data) {
+    if (data.bell) {
+      const positions = bell.geometry.getAttribute("position");
+      positions.array.set(data.bell);
+      positions.needsUpdate = true;
+      bell.geometry.computeVertexNormals();
+    }
+    if (data.tentacles) {
+      const particles = meta.tentacles.particles;
+      const count = data.tentacles.length / (3 * particles);
+      if (count !== state.drawnTentacles) {
+        tentacles.geometry.dispose();
+        tentacles.geometry = tentacleGeometry(count, particles);
+        state.drawnTentacles = count;
+      }
+      const positions = tentacles.geometry.getAttribute("position");
+      positions.array.set(data.tentacles);
+      positions.needsUpdate = true;
+    }
+    if (data.fluid) {
+      const positions = fluid.geometry.getAttribute("position");
+      const colors = fluid.geometry.getAttribute("color");
+      let alive = 0;
+      for (let i = 0; i < meta.fluid.particles; i++) {
+        const x = data.fluid[3 * i];
+        if (Number.isNaN(x)) continue; // left the domain
+        positions.setXYZ(alive, x, data.fluid[3 * i + 1], data.fluid[3 * i + 2]);
+        const color = fluid.userData.kindColors(i);
+        colors.setXYZ(alive, color.r, color.g, color.b);
+        alive++;
+      }
+      fluid.geometry.setDrawRange(0, alive);
+      positions.needsUpdate = true;
+      colors.needsUpdate = true;
+      state.fluidPoints = alive;
+    }
+    state.fluidPoints = fluid && fluid.visible ? state.fluidPoints : 0;
+
+    // Following: move the camera with the jellyfish (the bell's centre, else the roots').
+    const next = data.bell
+      ? meanOf(data.bell, 3, meta.bell.vertices)
+      : data.tentacles
+        ? meanOf(data.tentacles, 3 * meta.tentacles.particles, state.drawnTentacles)
+        : null;
+    if (next && centre && $("follow").checked) {
+      const shift = next.clone().sub(centre);
+      camera.position.add(shift);
+      controls.target.add(shift);
+    }
+    centre = next;
+    drawn = data;
+
+    state.frame = frame;
+    if (!scrubbing) scrub.value = String(frame);
+    const end = meta.time[meta.time.length - 1];
+    $("clock").textContent =
+      `t = ${meta.time[frame].toFixed(3)} s / ${end.toFixed(3)} s · frame ${frame} / ${meta.frames - 1}`;
+    if (!state.ready) {
+      state.ready = true;
+      reframe();
+    }
+  }
+
+  // Playback, scrubbing and the controls.
+  let scrubbing = false;
+  let dirty = true; // redraw even if the frame is the same (new tentacle count, fluid shown)
+  const setPlaying = (playing) => {
+    state.playing = playing;
+    $("play").textContent = playing ? "Pause" : "Play";
+  };
+  $("play").addEventListener("click", (event) => {
+    setPlaying(!state.playing);
+    event.currentTarget.blur(); // the space bar stays with the page
+  });
+  document.addEventListener("keydown", (event) => {
+    // Space plays and pauses, except where it works a control: a checkbox, the speed menu.
+    if (event.code !== "Space" || event.target.matches("select, input[type=checkbox]")) return;
+    event.preventDefault();
+    setPlaying(!state.playing);
+  });
+  scrub.addEventListener("pointerdown", () => { scrubbing = true; });
+  window.addEventListener("pointerup", () => { scrubbing = false; }); // released anywhere
+  window.addEventListener("pointercancel", () => { scrubbing = false; });
+  scrub.addEventListener("input", () => { state.position = Number(scrub.value); });
+  $("speed").addEventListener("change", (event) => { state.speed = Number(event.target.value); });
+  $("bell").addEventListener("change", (event) => { if (bell) bell.visible = event.target.checked; });
+  $("fluid").addEventListener("change", (event) => {
+    fluid.visible = event.target.checked;
+    dirty = true;
+  });
+  slider.addEventListener("input", () => { $("interpolation-value").textContent = slider.value; });
+  slider.addEventListener("change", () => {
+    state.interpolation = Number(slider.value);
+    dirty = true;
+  });
+  $("follow").addEventListener("change", reframe);
+  $("reframe").addEventListener("click", (event) => {
+    reframe();
+    event.currentTarget.blur();
+  });
+  $("panel").addEventListener("submit", (event) => event.preventDefault());
+  window.addEventListener("resize", () => {
+    camera.aspect = window.innerWidth / window.innerHeight;
+    camera.updateProjectionMatrix();
+    renderer.setSize(window.innerWidth, window.innerHeight);
+  });
+
+  let last = performance.now();
+  renderer.setAnimationLoop((now) => {
+    const seconds = Math.min((now - last) / 1000, 0.25);
+    last = now;
+    if (state.playing && !scrubbing && state.ready) {
+      const next = (state.position + seconds * meta.fps * state.speed) % meta.frames;
+      if (dataFor(Math.floor(next)) !== null) state.position = next; // else wait for the data
+    }
+    const frame = Math.floor(state.position);
+    if (frame !== state.frame || dirty) {
+      const data = dataFor(frame);
+      if (data !== null) {
+        draw(frame, data);
+        dirty = false;
+      }
+    }
+    const waiting = frame !== state.frame || dirty;
+    if (!state.error) {
+      $("status").textContent = waiting ? "loading…" : `${meta.name}${meta.complete ? "" : " (incomplete run)"}`;
+    }
+    // Read ahead: the next chunk (wrapping to the start) of every part shown.
+    const ahead = (Math.floor(frame / CHUNK) + 1) % Math.ceil(meta.frames / CHUNK);
+    for (const part of ["bell", "tentacles", "fluid"]) {
+      if (meta[part].present && (part !== "fluid" || fluid.visible)) {
+        store.load(part, ahead, state.interpolation);
+      }
+    }
+    controls.update();
+    renderer.render(scene, camera);
+  });
+}
+
+main().catch(showError);

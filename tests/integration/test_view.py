@@ -1,0 +1,368 @@
+"""``jellysim view``: the server's metadata and frame chunks against result.h5 (the drawn tentacles
+against :func:`interpolate_result`), only its named routes served, bad input exiting 2, Ctrl-C
+exiting 0, and the page itself in headless Chromium (tests/integration/view_e2e.mjs)."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import jellysim
+from jellysim.cli.main import main
+from jellysim.errors import InputError
+from jellysim.interpolation import interpolate_result
+from jellysim.render.pipeline import scene_look
+from jellysim.view import find_web_modules, serve
+from jellysim.view.server import WEB_MODULES_ENV, ViewServer
+
+CHROMIUM = "/usr/bin/chromium"
+FLUID_FRAMES = 10
+FLUID_PARTICLES = 120
+THREE_PATHS = (
+    "/vendor/three/three.module.js",
+    "/vendor/three/three.core.js",
+    "/vendor/three/OrbitControls.js",
+)
+
+
+@pytest.fixture(scope="module")
+def brown(tmp_path_factory: pytest.TempPathFactory) -> Iterator[jellysim.Result]:
+    folder = tmp_path_factory.mktemp("brown")
+    result = jellysim.run("brown-jelly", folder, overrides={"duration": 0.6, "fps": 20.0})
+    yield result
+    result.close()
+
+
+@pytest.fixture(scope="module")
+def fluid(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 2-D fluid-only result: a block of particles sliding down, some leaving the domain."""
+    folder = tmp_path_factory.mktemp("fluid")
+    x, y = np.meshgrid(np.arange(12) * 0.01, np.arange(10) * 0.01 + 0.05)
+    block = np.stack([x.ravel(), y.ravel()], axis=1)
+    assert block.shape[0] == FLUID_PARTICLES
+    position = np.stack([block + [0.01 * f, -0.004 * f] for f in range(FLUID_FRAMES)])
+    alive = np.ones((FLUID_FRAMES, FLUID_PARTICLES), dtype=bool)
+    alive[4:, :5] = False
+    kind = np.zeros(FLUID_PARTICLES, dtype=np.int8)
+    kind[-12:] = 1  # a row of wall particles
+    with h5py.File(folder / "result.h5", "w") as f:
+        f["time"] = np.arange(FLUID_FRAMES) / 10.0
+        f["fluid/position"] = position
+        f["fluid/alive"] = alive
+        f["fluid/kind"] = kind
+        f.attrs["scene"] = 'name = "block"\nfps = 10.0\nduration = 0.9\n'
+        f.attrs["fps"] = 10.0
+        f.attrs["frames_expected"] = FLUID_FRAMES
+        f.attrs["particle_spacing"] = 0.01
+    return folder
+
+
+@contextmanager
+def serving(folder: str | Path) -> Iterator[str]:
+    """``serve`` in a thread on a free port; yields its address."""
+    started = threading.Event()
+    box: dict[str, object] = {}
+
+    def ready(server: ViewServer) -> None:
+        box["server"] = server
+        started.set()
+
+    def run() -> None:
+        try:
+            serve(folder, port=0, browser=False, ready=ready)
+        except BaseException as err:  # handed to the test
+            box["error"] = err
+            started.set()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    assert started.wait(60)
+    if "error" in box:
+        raise box["error"]  # type: ignore[misc]
+    server = box["server"]
+    assert isinstance(server, ViewServer)
+    try:
+        yield server.url
+    finally:
+        server.shutdown()
+        thread.join(10)
+
+
+@pytest.fixture(scope="module")
+def brown_url(brown: jellysim.Result) -> Iterator[str]:
+    with serving(brown.folder) as url:
+        yield url
+
+
+@pytest.fixture(scope="module")
+def fluid_url(fluid: Path) -> Iterator[str]:
+    with serving(fluid) as url:
+        yield url
+
+
+def get(url: str) -> bytes:
+    with urllib.request.urlopen(url, timeout=30) as response:
+        return response.read()
+
+
+def status(url: str, path: str, headers: dict[str, str] | None = None) -> int:
+    """The status of a GET of ``path`` sent exactly as written (no client-side normalising)."""
+    host, port = url.removeprefix("http://").rstrip("/").rsplit(":", 1)
+    connection = http.client.HTTPConnection(host, int(port), timeout=30)
+    try:
+        connection.request("GET", path, headers=headers or {})
+        response = connection.getresponse()
+        response.read()
+        return response.status
+    finally:
+        connection.close()
+
+
+def floats(data: bytes, *shape: int) -> np.ndarray:
+    return np.frombuffer(data, dtype="<f4").reshape(shape)
+
+
+def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -> None:
+    meta = json.loads(get(brown_url + "meta.json"))
+    f = brown.file
+    scene = brown.scene
+    assert meta["name"] == "brown-jelly"
+    assert meta["fps"] == 20.0 and meta["frames"] == brown.frames == 13 and meta["complete"]
+    np.testing.assert_array_equal(meta["time"], brown.time)
+    look = scene_look(scene)
+    assert meta["look"]["bell_color"] == list(look.bell_color)
+    assert meta["look"]["tentacle_color"] == list(look.tentacle_color)
+    assert meta["look"]["bell_transparency"] == look.bell_transparency
+    assert meta["bell"] == {
+        "present": True,
+        "vertices": f["bell/surface_vertices"].shape[1],
+        "faces": f["bell/surface_faces"].shape[0],
+    }
+    assert meta["tentacles"] == {
+        "present": True,
+        "simulated": 6,
+        "particles": 60,
+        "interpolation": scene.tentacles.interpolation,
+        "max_interpolation": 50,
+    }
+    assert meta["fluid"]["present"] is False
+    low, high = np.array(meta["bounds"])
+    points = np.concatenate(
+        [f["bell/surface_vertices"][:].reshape(-1, 3), brown.tentacle_positions.reshape(-1, 3)]
+    )
+    np.testing.assert_allclose(low, points.min(axis=0))
+    np.testing.assert_allclose(high, points.max(axis=0))
+    assert 0.0 < meta["extent"] <= float((high - low).max())
+    assert meta["travels"] is False  # 0.6 s of swimming: less than its size
+
+
+def test_bell_faces_and_vertices_match_the_result(brown: jellysim.Result, brown_url: str) -> None:
+    f = brown.file
+    faces = np.frombuffer(get(brown_url + "bell-faces"), dtype="<u4").reshape(-1, 3)
+    np.testing.assert_array_equal(faces, f["bell/surface_faces"][:])
+    vertices = f["bell/surface_vertices"].shape[1]
+    chunk = floats(get(brown_url + "frames?part=bell&start=3&count=5"), 5, vertices, 3)
+    np.testing.assert_allclose(chunk, f["bell/surface_vertices"][3:8], rtol=1e-6, atol=1e-7)
+    # A chunk reaching past the end stops at the last frame.
+    tail = floats(get(brown_url + "frames?part=bell&start=10&count=16"), 3, vertices, 3)
+    np.testing.assert_allclose(tail, f["bell/surface_vertices"][10:], rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("factor", [None, 1, 4])
+def test_tentacle_chunks_are_the_drawn_tentacles(
+    brown: jellysim.Result, brown_url: str, factor: int | None
+) -> None:
+    drawn = interpolate_result(brown, factor)
+    count = drawn.shape[1]
+    assert count == 6 * (factor or brown.scene.tentacles.interpolation)
+    query = "" if factor is None else f"&interpolation={factor}"
+    for start, length in ((0, 13), (0, 4), (7, 4), (12, 1)):
+        url = f"{brown_url}frames?part=tentacles&start={start}&count={length}{query}"
+        chunk = floats(get(url), length, count, 60, 3)
+        np.testing.assert_allclose(chunk, drawn[start : start + length], rtol=0, atol=1e-6)
+    # The simulated tentacles are among them, as simulated.
+    every = count // 6
+    np.testing.assert_allclose(chunk[:, ::every], brown.tentacle_positions[12:13], atol=1e-6)
+
+
+def test_fluid_chunks_are_world_points_with_dead_particles_nan(fluid: Path, fluid_url: str) -> None:
+    meta = json.loads(get(fluid_url + "meta.json"))
+    assert meta["fluid"] == {
+        "present": True,
+        "particles": FLUID_PARTICLES,
+        "dimensions": 2,
+        "radius": pytest.approx(0.005),
+    }
+    assert not meta["bell"]["present"] and not meta["tentacles"]["present"]
+    kinds = np.frombuffer(get(fluid_url + "fluid-kinds"), dtype=np.uint8)
+    assert kinds.tolist() == [0] * (FLUID_PARTICLES - 12) + [1] * 12
+    chunk = floats(get(fluid_url + "frames?part=fluid&start=2&count=4"), 4, FLUID_PARTICLES, 3)
+    with h5py.File(fluid / "result.h5", "r") as f:
+        position, alive = f["fluid/position"][2:6], f["fluid/alive"][2:6]
+    assert np.all(np.isnan(chunk[~alive])) and not np.any(np.isnan(chunk[alive]))
+    np.testing.assert_allclose(chunk[alive][:, [0, 2]], position[alive], atol=1e-6)  # (x, 0, y)
+    assert np.all(chunk[alive][:, 1] == 0.0)
+
+
+def test_only_the_named_routes_are_served(brown_url: str) -> None:
+    page = get(brown_url).decode("utf-8")
+    assert '<script type="importmap">' in page and "/static/viewer.js" in page
+    for path in ("/static/viewer.js", "/static/data.js", "/static/style.css"):
+        assert status(brown_url, path) == 200
+    for path in THREE_PATHS:
+        assert status(brown_url, path) == 200
+    for path in (
+        "/nothing",
+        "/static/../../etc/passwd",
+        "/static/%2e%2e/%2e%2e/etc/passwd",
+        "/static/..%2f..%2fresult.h5",
+        "/static/",
+        "/result.h5",
+        "/vendor/three/../../package.json",
+        "//etc/passwd",
+        "/frames/../meta.json",
+    ):
+        assert status(brown_url, path) == 404, path
+
+
+@pytest.mark.parametrize(
+    ("query", "code"),
+    [
+        ("part=tentacles&start=0&count=4&interpolation=51", 400),
+        ("part=tentacles&start=0&count=4&interpolation=0", 400),
+        ("part=bell&start=13&count=1", 400),
+        ("part=bell&start=-1&count=1", 400),
+        ("part=bell&start=0&count=0", 400),
+        ("part=bell&start=0&count=257", 400),
+        ("part=bell&start=zero&count=1", 400),
+        ("part=mantle&start=0&count=1", 400),
+        ("part=fluid&start=0&count=1", 404),
+    ],
+)
+def test_bad_frame_requests(brown_url: str, query: str, code: int) -> None:
+    assert status(brown_url, "/frames?" + query) == code
+
+
+def test_a_foreign_host_name_is_refused_on_loopback(brown_url: str) -> None:
+    assert status(brown_url, "/meta.json", {"Host": "rebound.example:80"}) == 403
+    assert status(brown_url, "/meta.json", {"Host": "localhost:1"}) == 200
+
+
+def _exit_2(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    assert main(["view", *argv, "--no-browser"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    return err
+
+
+def test_bad_input_exits_2_with_one_line(
+    brown: jellysim.Result, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
+) -> None:
+    assert "not found" in _exit_2(capsys, str(tmp_path / "missing"))
+    (tmp_path / "result.h5").write_text("not HDF5")
+    assert "cannot open" in _exit_2(capsys, str(tmp_path))
+    assert "--port 70000" in _exit_2(capsys, str(brown.folder), "--port", "70000")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = str(taken.getsockname()[1])
+        assert "cannot listen" in _exit_2(capsys, str(brown.folder), "--port", port)
+    monkeypatch.setenv(WEB_MODULES_ENV, str(tmp_path))
+    assert "three.js not found" in _exit_2(capsys, str(brown.folder))
+
+
+def test_missing_three_js_says_to_run_make_web(
+    brown: jellysim.Result, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
+) -> None:
+    import jellysim.view.server as server
+
+    modules = tmp_path / "node_modules"
+    for part in server.THREE_FILES.values():
+        (modules / part).parent.mkdir(parents=True, exist_ok=True)
+        (modules / part).write_text("export {};")
+    monkeypatch.setenv(WEB_MODULES_ENV, str(modules))
+    assert find_web_modules() == modules
+    monkeypatch.delenv(WEB_MODULES_ENV, raising=False)
+    monkeypatch.setattr(server, "__file__", str(tmp_path / "src" / "jellysim" / "view" / "x.py"))
+    with pytest.raises(InputError, match=r"make web.*npm ci"):
+        find_web_modules()
+    assert "run 'make web'" in _exit_2(capsys, str(brown.folder))
+
+
+def test_ctrl_c_stops_the_server_with_exit_0(brown: jellysim.Result) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "JELLYSIM_DEBUG"}
+    source = str(Path(jellysim.__file__).parents[1])  # this checkout's src/, as imported here
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [source, env.get("PYTHONPATH")]))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "jellysim", "view", str(brown.folder), "--no-browser"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        assert line.startswith(f"jellysim view: serving {brown.folder} at http://127.0.0.1:")
+        url = line.split(" at ")[1].split()[0]
+        assert json.loads(get(url + "meta.json"))["frames"] == brown.frames
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0
+    assert "Traceback" not in err
+
+
+def _browser_tools() -> tuple[str, Path] | None:
+    node = shutil.which("node")
+    try:
+        modules = find_web_modules()
+    except InputError:
+        return None
+    if node is None or not (modules / "playwright-core").is_dir() or not Path(CHROMIUM).exists():
+        return None
+    return node, modules
+
+
+def test_the_page_plays_in_headless_chromium(
+    brown: jellysim.Result, brown_url: str, fluid_url: str, tmp_path: Path
+) -> None:
+    tools = _browser_tools()
+    if tools is None:
+        if os.environ.get("CI"):
+            pytest.fail("the viewer test needs node, web/node_modules and chromium (make test)")
+        pytest.skip("node, web/node_modules (make web) or chromium (make chromium) missing")
+    node, modules = tools
+    script = Path(__file__).with_name("view_e2e.mjs")
+    done = subprocess.run(
+        [node, str(script), str(modules), CHROMIUM, str(tmp_path), brown_url, fluid_url],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    pages = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert len(pages) == 2
+    jelly, block = pages
+    assert jelly["advanced"] and jelly["pixelsChanged"] and block["advanced"]
+    assert jelly["drawnTentacles"] == [6 * brown.scene.tentacles.interpolation, 6 * 3]
+    assert block["fluidPoints"][0] > 0 and block["fluidPoints"][1] == 0
+    for page in pages:
+        assert Path(page["screenshot"]).stat().st_size > 5000
