@@ -218,11 +218,15 @@ def _check_consistency(scene: Scene) -> None:
             "tentacles.count = 0 is not allowed: expected an integer >= 1 (0 only in fluid-only "
             "scenes, fluid.model = 'mps')"
         )
-    if scene.fluid.model == "mps" and scene.tentacles.count > 0:
+    soft = scene.bell.model == "mass-spring"
+    if scene.fluid.model == "mps" and scene.tentacles.count > 0 and not soft:
         raise InputError(
-            f"fluid.model = 'mps' runs fluid-only scenes: set tentacles.count = 0 (it is "
-            f"{scene.tentacles.count}); tentacles in the fluid come with the mass-spring bell"
+            f"fluid.model = 'mps' without a bell runs fluid-only scenes: set tentacles.count = 0 "
+            f"(it is {scene.tentacles.count}); tentacles in the fluid come with "
+            "bell.model = 'mass-spring'"
         )
+    if soft:
+        _check_soft_bell(scene)
     if scene.fluid.model == "mps" and scene.fluid.dimensions == 2 and scene.water.gravity[2] != 0:
         raise InputError(
             "water.gravity: a 2-D fluid lives in the (x, y) plane with y up; give gravity as "
@@ -238,10 +242,46 @@ def _check_consistency(scene: Scene) -> None:
         )
 
 
+def _check_soft_bell(scene: Scene) -> None:
+    """The mass-spring bell lives in a 3-D MPS tank filled with water, inside the water."""
+    b, f = scene.bell, scene.fluid
+    if f.model != "mps" or f.dimensions != 3 or f.geometry != "hydrostatic":
+        raise InputError(
+            "bell.model = 'mass-spring' swims in the MPS fluid: set fluid.model = 'mps', "
+            "fluid.dimensions = 3 and fluid.geometry = 'hydrostatic' (a filled tank)"
+        )
+    if b.lobes > 0:
+        raise InputError("bell.lobes: the mass-spring bell has a round margin; set bell.lobes = 0")
+    cells = b.margin_height / f.spacing
+    if abs(cells - round(cells)) > 1e-6 * max(1.0, cells):
+        raise InputError(
+            f"bell.margin_height = {_show(b.margin_height)} is not a whole number of "
+            f"fluid.spacing = {_show(f.spacing)}: the bell is carved out of the fluid's lattice"
+        )
+    l0 = f.spacing
+    if b.thickness * b.height < 1.5 * l0 or b.radius < 4 * l0:
+        raise InputError(
+            "bell: the shell must be at least 1.5 fluid.spacing thick (bell.thickness x "
+            "bell.height) and the radius at least 4 fluid.spacing; refine fluid.spacing"
+        )
+    if (
+        2.0 * (b.radius + 2 * l0) > min(f.tank_width, f.tank_depth)
+        or b.margin_height < 2 * l0
+        or b.margin_height + b.height + 2 * l0 > f.water_height
+    ):
+        raise InputError(
+            "bell: the bell must stand in the water with 2 fluid.spacing to spare: "
+            "2 (radius + 2 l0) <= tank width and depth, margin_height >= 2 l0, "
+            "margin_height + height + 2 l0 <= fluid.water_height"
+        )
+
+
 def _check_fluid(scene: Scene) -> None:
     """The tank and the water must sit on the fluid's lattice, the water inside the tank."""
     f = scene.fluid
-    lengths = ["tank_width", "tank_height", "water_width", "water_height"]
+    lengths = ["tank_width", "tank_height", "water_height"]
+    if f.geometry == "dam-break":
+        lengths.append("water_width")
     if f.dimensions == 3:
         lengths.append("tank_depth")
     for name in lengths:
@@ -252,7 +292,9 @@ def _check_fluid(scene: Scene) -> None:
                 f"fluid.{name} = {_show(value)} is not a whole number (>= 2) of "
                 f"fluid.spacing = {_show(f.spacing)}: the tank and the water sit on its lattice"
             )
-    if f.water_height > f.tank_height or f.water_width > f.tank_width:
+    if f.water_height > f.tank_height or (
+        f.geometry == "dam-break" and f.water_width > f.tank_width
+    ):
         raise InputError(
             "fluid: the water must fit in the tank (water_width <= tank_width, "
             "water_height <= tank_height)"

@@ -110,8 +110,9 @@ class Bell:
     model: str = param(
         "none",
         kind="choice",
-        choices=("none", "kinematic"),
-        doc="bell model driving the tentacle roots: 'kinematic' (a rigid, animated bell) or "
+        choices=("none", "kinematic", "mass-spring"),
+        doc="bell model driving the tentacle roots: 'kinematic' (a rigid, animated bell), "
+        "'mass-spring' (a soft bell of particles and springs pulsing in the MPS fluid) or "
         "'none' (a still margin whose roots are forced by [root_motion])",
     )
     radius: float = param(0.15, unit="m", gt=0.0, le=1.0e3, doc="margin radius of the bell")
@@ -119,7 +120,11 @@ class Bell:
         0.1, unit="m", gt=0.0, le=1.0e3, doc="height of the bell from margin to apex, at rest"
     )
     thickness: float = param(
-        0.25, gt=0.0, lt=1.0, doc="thickness of the bell at the apex, as a fraction of its height"
+        0.25,
+        gt=0.0,
+        lt=1.0,
+        doc="thickness of the bell at the apex, as a fraction of its height (mass-spring: "
+        "everywhere)",
     )
     lobes: int = param(
         0, kind="int", ge=0, le=1000, doc="number of marginal lobes (0: a smooth round margin)"
@@ -151,6 +156,44 @@ class Bell:
     )
     swim_speed: float = param(
         0.0, unit="m/s", ge=0.0, le=100.0, doc="mean forward speed of the bell along its axis"
+    )
+    margin_height: float = param(
+        0.5,
+        unit="m",
+        gt=0.0,
+        le=1.0e3,
+        doc="mass-spring: height of the margin plane above the tank floor (the bell stands "
+        "centred in the tank; a whole number of fluid.spacing)",
+    )
+    spring_radius: float = param(
+        2.4,
+        ge=2.0,
+        le=4.0,
+        doc="mass-spring: particles closer than this many fluid.spacing at the start are joined "
+        "by springs",
+    )
+    spring_stiffness: float = param(
+        20.0, unit="N/m", gt=0.0, le=1.0e9, doc="mass-spring: spring constant k of Hooke's law"
+    )
+    muscle_ratio: float = param(
+        0.4,
+        ge=0.0,
+        lt=1.0,
+        doc="mass-spring: fraction of their length the circular-muscle springs lose at full "
+        "contraction (0: the muscle is off)",
+    )
+    muscle_stiffening: float = param(
+        50.0,
+        ge=1.0,
+        le=1.0e4,
+        doc="mass-spring: factor on the muscle springs' constant at full contraction",
+    )
+    muscle_band: float = param(
+        0.3,
+        gt=0.0,
+        lt=1.0,
+        doc="mass-spring: height of the margin band holding the circular muscle, a fraction of "
+        "the bell height",
     )
     speed_variation: float = param(
         0.8,

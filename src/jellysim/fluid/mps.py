@@ -67,6 +67,8 @@ class MPSParameters:
     - ``compressibility`` alpha (1/Pa): adds ``(rho alpha / dt^2) p`` to the PPE's left side, the
       fluid's slight compressibility [Ikeda et al. 2001]. It keeps the matrix non-singular when no
       particle is on the free surface; water's 0.45e-9 1/Pa makes it a regulariser only.
+    - ``free_fall_floor``: whether the CFL speed is floored at a free fall over the water's
+      height (:meth:`MPSSolver.stable_dt`).
     - ``domain_min``/``domain_max`` (m): particles leaving the box die (``alive`` False). None:
       the initial particles' bounding box widened by its own size on every side.
     """
@@ -90,6 +92,7 @@ class MPSParameters:
     tolerance: float = 1e-8
     max_iterations: int = 2000
     courant: float = 0.2
+    free_fall_floor: bool = True
     diffusion_number: float = 0.2
     compressibility: float = 0.45e-9
     domain_min: tuple[float, ...] | None = None
@@ -248,9 +251,11 @@ class MPSSolver:
     def stable_dt(self, external_acceleration: float = 0.0) -> float:
         """The largest step the stability limits allow (s), the least of:
 
-        - CFL: ``courant l0 / u``, u the largest fluid speed, floored at ``sqrt(2 a H)`` with a
-          = |g| + ``external_acceleration`` (m/s2, the largest external force over density) and
-          H the fluid's extent along gravity: the speed of a free fall over the fluid's height;
+        - CFL: ``courant l0 / u``, u the largest fluid speed, floored (``free_fall_floor``) at
+          ``sqrt(2 a H)`` with a = |g| + ``external_acceleration`` (m/s2, the largest external
+          force over density) and H the fluid's extent along gravity: the speed of a free fall
+          over the fluid's height, for water that can fall (a dam break); a filled tank, where
+          nothing falls, needs no floor;
         - acceleration: ``sqrt(courant l0 / a)``, the step in which a particle at rest moves
           courant l0;
         - viscosity: ``diffusion_number l0^2 / nu``.
@@ -265,7 +270,8 @@ class MPSSolver:
             axis = g / np.linalg.norm(g) if np.any(g) else np.eye(p.dim)[-1]
             along = self.position[fluid] @ axis
             height = float(along.max() - along.min()) + p.l0
-            speed = max(speed, math.sqrt(2.0 * a * height))
+            if p.free_fall_floor:
+                speed = max(speed, math.sqrt(2.0 * a * height))
             if speed > 0.0:
                 limits.append(p.courant * p.l0 / speed)
         if a > 0.0:

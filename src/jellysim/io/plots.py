@@ -228,6 +228,44 @@ def hydrostatic_plot(result: Result, path: Path) -> Path:
     return path
 
 
+def thrust_plot(result: Result, path: Path) -> Path:
+    """Paper Fig. 11: the mean height of the bell particles and the contraction ratio of the
+    bell's radius against time, each pulse's lag from peak contraction to peak upward speed
+    marked."""
+    from jellysim.bell.swimming import swim_cycles
+
+    plt = _pyplot()
+    f = result.file
+    time = result.time
+    height = np.asarray(f["bell/centre"][:, 2])
+    contraction = np.asarray(f["bell/contraction"][:])
+    period = result.scene.bell.period
+    fig, ax = plt.subplots(figsize=(7.2, 4.2), dpi=120)
+    ax.plot(time, height - height[0], color="tab:red", lw=1.6, label="mean height of the bell")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("z - z(0) of the bell particles [m]", color="tab:red")
+    other = ax.twinx()
+    other.plot(time, contraction, color="tab:blue", lw=1.2, ls="--", label="contraction ratio")
+    other.set_ylabel("contraction ratio of the radius", color="tab:blue")
+    cycles = swim_cycles(time, height, contraction, period)
+    for cycle in cycles:
+        ax.axvspan(cycle.peak_contraction_time, cycle.peak_speed_time, color="0.85", lw=0)
+    if cycles:
+        mean_rise = float(np.mean([c.rise for c in cycles]))
+        mean_lag = float(np.mean([c.lag for c in cycles]))
+        title = f"rise {mean_rise:.3g} m per pulse; lag contraction -> speed {mean_lag:.2f} s"
+    else:
+        title = "shorter than one pulse"
+    ax.set_title(f"{result.scene.name}: {title} (cf. paper Fig. 11)", fontsize=10)
+    ax.grid(alpha=0.3)
+    lines = ax.get_lines() + other.get_lines()
+    ax.legend(lines, [line.get_label() for line in lines], loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
     """Write every figure that applies to ``result`` into ``folder`` (default DIR/plots)."""
     folder = folder or result.folder / "plots"
@@ -238,7 +276,13 @@ def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
             root_tip_trace(result, folder / "root_tip_trace.png"),
             tentacle_shapes(result, folder / "tentacle_shapes.png"),
         ]
-    if "bell/surface_vertices" in result.file and result.time[-1] >= result.scene.bell.period:
+    if "bell/activation" in result.file:
+        paths.append(thrust_plot(result, folder / "thrust.png"))
+    if (
+        "bell/surface_vertices" in result.file
+        and "tentacles/position" in result.file
+        and result.time[-1] >= result.scene.bell.period
+    ):
         paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
     if "fluid/position" in result.file and "column_width" in result.file.attrs:
         paths.append(surge_front_plot(result, folder / "surge_front.png"))

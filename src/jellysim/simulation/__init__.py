@@ -252,7 +252,12 @@ def result_attributes(scene: Scene, scene_toml: str) -> dict[str, Any]:
 
 
 def make_simulation(scene: Scene) -> Any:
-    """The frame loop for a scene: tentacles driven by a bell, or a fluid-only MPS scene."""
+    """The frame loop for a scene: tentacles driven by a bell, the soft bell in its fluid, or a
+    fluid-only MPS scene."""
+    if scene.bell.model == "mass-spring":
+        from jellysim.simulation.soft import SoftBellSimulation
+
+        return SoftBellSimulation(scene)
     if scene.fluid.model == "mps":
         from jellysim.simulation.fluid import FluidSimulation
 
