@@ -47,6 +47,62 @@ def test_tentacles_and_bell_round_trip(brown: jellysim.Result, tmp_path: Path) -
         np.testing.assert_array_equal(bell.cells_dict["triangle"], faces)
 
 
+# A small soft bell in its tank (issue 6's test scale): three frames.
+SMALL_MOON = {
+    "duration": 0.2,
+    "fps": 10.0,
+    "tentacles.count": 2,
+    "fluid.spacing": 0.25,
+    "bell.height": 1.25,
+    "bell.thickness": 0.4,
+    "bell.margin_height": 1.0,
+    "fluid.tank_width": 5.5,
+    "fluid.tank_depth": 5.5,
+    "fluid.tank_height": 4.5,
+    "fluid.water_height": 3.75,
+}
+
+
+def test_mass_spring_bell_round_trip(tmp_path: Path) -> None:
+    """The soft bell's particles and springs, its surface, the fluid without the bell's rows and
+    the drawn tentacles, read back with meshio at every frame."""
+    moon = jellysim.run("moon-jelly", tmp_path / "moon", overrides=SMALL_MOON)
+    out = tmp_path / "vtk"
+    paths = export(moon, "vtk", out, interpolation=2)
+    assert sorted(p.name for p in paths) == [
+        "bell.pvd", "bell_particles.pvd", "fluid.pvd", "tentacles.pvd",
+    ]  # fmt: skip
+    f = moon.file
+    pairs = f["bell/springs"][:]
+    muscle = f["bell/muscle"][:]
+    rest = f["bell/rest_position"][:]
+    assert 0 < muscle.sum() < len(pairs)
+    entries = _pvd(out / "bell_particles.pvd")
+    np.testing.assert_allclose([t for t, _ in entries], moon.time)
+    for frame, (_, name) in enumerate(entries):
+        particles = meshio.read(out / name)
+        np.testing.assert_allclose(particles.points, f["bell/position"][frame], atol=1e-12)
+        np.testing.assert_allclose(
+            particles.point_data["velocity"], f["bell/velocity"][frame], atol=1e-12
+        )
+        np.testing.assert_array_equal(particles.cells_dict["line"], pairs)
+        np.testing.assert_array_equal(particles.cell_data["muscle"][0], muscle.astype(int))
+        np.testing.assert_allclose(
+            particles.cell_data["rest_length"][0],
+            np.linalg.norm(rest[pairs[:, 1]] - rest[pairs[:, 0]], axis=1),
+        )
+        surface = meshio.read(out / f"bell_{frame:05d}.vtu")
+        np.testing.assert_allclose(surface.points, f["bell/surface_vertices"][frame], atol=1e-6)
+        fluid = meshio.read(out / f"fluid_{frame:05d}.vtu")
+        alive = f["fluid/alive"][frame]
+        np.testing.assert_allclose(fluid.points, f["fluid/position"][frame][alive], atol=1e-6)
+    # The bell's particles are not among the fluid's.
+    assert f["fluid/position"].shape[1] == len(f["fluid/kind"][:])
+    first = f["fluid/position"][0].astype(float)
+    gap = np.min(np.linalg.norm(first[:, None, :] - rest[None, ::7, :], axis=2))
+    assert gap > 0.1 * 0.25
+
+
 def test_fluid_particles_round_trip(tmp_path: Path) -> None:
     folder = tmp_path / "fluid"
     folder.mkdir()

@@ -8,6 +8,9 @@ Parts (each present only when the result has it):
 - ``tentacles``: every drawn tentacle (cosine interpolation) as line segments, with the index of
   the drawn tentacle (``tentacle``) and the particle's distance from the root (``arc_length``, m).
 - ``bell``: the bell's surface triangles.
+- ``bell_particles`` (a mass-spring bell): its particles as points with ``velocity`` (m/s) and
+  ``particle`` (index in ``bell/position``), and its springs as line cells with ``muscle`` (1 for
+  a circular-muscle spring) and ``rest_length`` (m, the length at the start).
 
 Files: ``OUT/<part>_NNNNN.vtu`` and ``OUT/<part>.pvd`` (open the ``.pvd`` in ParaView: a time
 series at the result's frame times).
@@ -99,6 +102,28 @@ def bell_mesh(result: Result, frame: int) -> Any:
     return meshio.Mesh(vertices, [("triangle", faces)])
 
 
+def bell_particle_mesh(result: Result, frame: int) -> Any:
+    """The mass-spring bell at ``frame``: particles joined by their springs (line cells)."""
+    import meshio
+
+    f = result.file
+    position = np.asarray(f["bell/position"][frame], dtype=np.float64)
+    pairs = np.asarray(f["bell/springs"][:], dtype=np.int64)
+    rest = np.asarray(f["bell/rest_position"][:], dtype=np.float64)
+    return meshio.Mesh(
+        position,
+        [("line", pairs)],
+        point_data={
+            "particle": np.arange(len(position), dtype=np.int64),
+            "velocity": np.asarray(f["bell/velocity"][frame], dtype=np.float64),
+        },
+        cell_data={
+            "muscle": [np.asarray(f["bell/muscle"][:], dtype=np.int32)],
+            "rest_length": [np.linalg.norm(rest[pairs[:, 1]] - rest[pairs[:, 0]], axis=1)],
+        },
+    )
+
+
 def export_vtk(
     result: Result, out: Path, frames: range, interpolation: int | None = None
 ) -> list[Path]:
@@ -122,6 +147,8 @@ def export_vtk(
             meshes["tentacles"] = tentacle_mesh(drawn[frame], spacing)
         if "bell/surface_vertices" in f:
             meshes["bell"] = bell_mesh(result, frame)
+        if "bell/springs" in f:  # a kinematic bell's bell/position is its surface (a link)
+            meshes["bell_particles"] = bell_particle_mesh(result, frame)
         for part, mesh in meshes.items():
             name = f"{part}_{frame:05d}.vtu"
             meshio.write(out / name, mesh, file_format="vtu")

@@ -286,6 +286,10 @@ def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
         paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
     if "fluid/position" in result.file and "column_width" in result.file.attrs:
         paths.append(surge_front_plot(result, folder / "surge_front.png"))
-    if "fluid/position" in result.file and "water_depth" in result.file.attrs:
+    if (
+        "fluid/position" in result.file
+        and "water_depth" in result.file.attrs
+        and np.any(result.scene.water.gravity)  # weightless water has no hydrostatic law
+    ):
         paths.append(hydrostatic_plot(result, folder / "hydrostatic_pressure.png"))
     return paths

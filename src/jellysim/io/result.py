@@ -1,7 +1,9 @@
 """The result store: ``result.h5`` (layout in DESIGN §3), written frame by frame in HDF5 SWMR mode.
 
 Frames are appended in batches, each flushed to disk before its frames count as written, so a
-run killed at any moment (SIGKILL included) leaves a file holding every reported frame. A file
+run killed at any moment (SIGKILL included) leaves a file holding every reported frame. The
+length of ``time`` is the number of frames written (it is extended last in each batch); other
+per-frame datasets of a killed run may hold a few rows more, which readers ignore. A file
 whose writer was killed still carries HDF5's "open for writing" flag: jellysim's own reader
 opens it (in SWMR read mode); other tools need ``h5clear -s result.h5`` (Debian package
 hdf5-tools) first, or a ``jellysim run --resume``, which rewrites it cleanly.
@@ -126,11 +128,13 @@ class ResultWriter:
         pending = len(self._buffer["time"])
         if pending:
             start = self.frames
-            for name, ds in self._datasets.items():
+            # ``time`` goes last: its length is the count of written frames, so a kill in the
+            # middle of a batch leaves the other datasets at least that long, never shorter.
+            for name in sorted(self._datasets, key=lambda name: name == "time"):
+                ds = self._datasets[name]
                 ds.resize(start + pending, axis=0)
                 ds[start:] = np.stack(self._buffer[name])
                 self._buffer[name].clear()
-            for ds in self._datasets.values():
                 ds.flush()
             self._file.flush()
             self.frames = start + pending
@@ -194,7 +198,8 @@ class Result:
         self.file.close()
 
     def _array(self, name: str) -> np.ndarray:
-        return np.asarray(self.file[name][:])
+        # A run killed mid-batch may leave a dataset longer than ``time``; those rows never counted.
+        return np.asarray(self.file[name][: self.frames])
 
     @property
     def time(self) -> np.ndarray:

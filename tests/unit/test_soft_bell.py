@@ -1,0 +1,186 @@
+"""The mass-spring bell (paper §4.2.1-4.2.4, docs/theory/bell.md Eq. B7-B12) without the fluid:
+shape, springs, muscle, records, roots and the skinned surface."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import jellysim
+from jellysim.bell.soft import CIRCUMFERENTIAL, SoftBell
+from jellysim.fluid.geometry import FLUID
+from jellysim.simulation.fluid import fluid_particles
+
+# A bell 8 l0 wide and 5 l0 tall in a 22 x 22 x 15 l0 tank: resolved, yet small.
+SMALL = {
+    "fluid.spacing": 0.25,
+    "bell.radius": 2.0,
+    "bell.height": 1.25,
+    "bell.thickness": 0.4,
+    "bell.margin_height": 1.0,
+    "fluid.tank_width": 5.5,
+    "fluid.tank_depth": 5.5,
+    "fluid.tank_height": 4.5,
+    "fluid.water_height": 3.75,
+}
+
+
+@pytest.fixture(scope="module")
+def scene() -> jellysim.Scene:
+    return jellysim.load_scene("moon-jelly", SMALL)
+
+
+@pytest.fixture(scope="module")
+def bell(scene: jellysim.Scene) -> SoftBell:
+    return SoftBell(scene)
+
+
+def test_particles_are_lattice_cells_of_the_shell(scene: jellysim.Scene, bell: SoftBell) -> None:
+    l0 = scene.fluid.spacing
+    cells = bell.rest / l0 - 0.5
+    assert np.allclose(cells, np.round(cells), atol=1e-9)  # on the fluid's cell-centred lattice
+    positions, kinds, _ = fluid_particles(scene)
+    carved = (kinds == FLUID) & bell.shell(positions)
+    np.testing.assert_array_equal(positions[carved], bell.rest)
+    # Shell volume between the half-ellipsoids (2/3 pi (R^2 H - r^2 h)) over l0^3, within 15 %.
+    b = scene.bell
+    w = b.thickness * b.height
+    volume = 2.0 / 3.0 * math.pi * (b.radius**2 * b.height - (b.radius - w) ** 2 * (b.height - w))
+    assert len(bell.rest) == pytest.approx(volume / l0**3, rel=0.15)
+    relative = bell.rest - bell.centre
+    assert relative[:, 2].min() == pytest.approx(0.5 * l0)  # the margin layer on the plane
+
+
+def test_springs_join_every_close_pair_once(scene: jellysim.Scene, bell: SoftBell) -> None:
+    reach = scene.bell.spring_radius * scene.fluid.spacing
+    d = np.linalg.norm(bell.rest[:, None] - bell.rest[None], axis=2)
+    close = np.argwhere(np.triu(d < reach, k=1))
+    np.testing.assert_array_equal(bell.springs.pairs, close)  # brute force, same order
+    np.testing.assert_allclose(bell.springs.rest_length, d[close[:, 0], close[:, 1]])
+
+
+def test_muscle_springs_run_around_the_margin_band(scene: jellysim.Scene, bell: SoftBell) -> None:
+    s = bell.springs
+    ends = bell.rest[s.pairs[s.muscle]]
+    assert s.muscle.sum() > 0
+    band = scene.bell.muscle_band * scene.bell.height
+    assert np.all(ends[..., 2] - bell.centre[2] < band)
+    direction = ends[:, 1] - ends[:, 0]
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    mid = ends.mean(axis=1) - bell.centre
+    theta = np.stack([-mid[:, 1], mid[:, 0], np.zeros(len(mid))], axis=1)
+    theta /= np.linalg.norm(theta, axis=1)[:, None]
+    assert np.all(np.abs(np.einsum("ij,ij->i", direction, theta)) >= CIRCUMFERENTIAL - 1e-12)
+
+
+def _reference_forces(bell: SoftBell, positions: np.ndarray, time: float) -> np.ndarray:
+    """Paper Eq. 6 summed pair by pair, with the muscle's rest length and stiffness (Eq. B9)."""
+    a = bell.activation(time)
+    forces = np.zeros_like(positions)
+    for (i, j), rest, muscle in zip(
+        bell.springs.pairs, bell.springs.rest_length, bell.springs.muscle, strict=True
+    ):
+        k = bell.stiffness * (1.0 + (bell.muscle_stiffening - 1.0) * a if muscle else 1.0)
+        length0 = rest * (1.0 - bell.muscle_ratio * a if muscle else 1.0)
+        r = positions[i] - positions[j]
+        force = -k * (np.linalg.norm(r) - length0) * r / np.linalg.norm(r)
+        forces[i] += force
+        forces[j] -= force
+    return forces
+
+
+@pytest.mark.parametrize("time", [0.0, 0.3, 0.6, 1.4])
+def test_spring_forces_match_hookes_law_and_sum_to_zero(bell: SoftBell, time: float) -> None:
+    rng = np.random.default_rng(3)
+    positions = bell.rest + 0.1 * bell.l0 * rng.standard_normal(bell.rest.shape)
+    forces = np.empty_like(positions)
+    bell.spring_forces(positions, time, forces)
+    expected = _reference_forces(bell, positions, time)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(forces, expected, atol=1e-12 * scale)
+    # Newton's third law: no net force and no net torque from internal springs.
+    np.testing.assert_allclose(forces.sum(axis=0), 0.0, atol=1e-10 * scale)
+    torque = np.cross(positions, forces).sum(axis=0)
+    np.testing.assert_allclose(torque, 0.0, atol=1e-9 * scale * np.abs(positions).max())
+
+
+def test_relaxed_bell_feels_no_spring_force(bell: SoftBell) -> None:
+    forces = np.empty_like(bell.rest)
+    bell.spring_forces(bell.rest, 0.0, forces)  # activation 0 at t = 0
+    assert np.abs(forces).max() == 0.0
+
+
+def test_muscle_cycle_is_periodic_continuous_and_full(bell: SoftBell) -> None:
+    period = bell.period
+    times = np.linspace(0.0, 3.0 * period, 3001)
+    a = np.array([bell.activation(t) for t in times])
+    assert a[0] == 0.0 and a.min() >= 0.0 and a.max() == pytest.approx(1.0, abs=1e-4)
+    later = np.array([bell.activation(t + period) for t in times])
+    np.testing.assert_allclose(later, a, atol=1e-12)  # periodic
+    step = times[1] - times[0]
+    # C1 waveform: the largest jump between samples is bounded by the peak slope times the step.
+    assert np.abs(np.diff(a)).max() < 2.0 / (bell.jet_fraction * period) * step
+    assert bell.activation(bell.jet_fraction * period) == pytest.approx(1.0)
+
+
+def test_roots_sit_on_the_margin_and_hang_down_at_rest(
+    scene: jellysim.Scene, bell: SoftBell
+) -> None:
+    roots, velocities, directions = bell.roots(np.array([0.0]))
+    assert roots.shape == (1, scene.tentacles.count, 3)
+    np.testing.assert_allclose(velocities, 0.0)
+    np.testing.assert_allclose(directions[0], np.tile([0.0, 0.0, -1.0], (len(roots[0]), 1)),
+                               atol=1e-12)  # fmt: skip
+    relative = roots[0] - bell.centre
+    angles = np.mod(np.arctan2(relative[:, 1], relative[:, 0]), 2 * np.pi)
+    expected = 2 * np.pi * np.arange(scene.tentacles.count) / scene.tentacles.count
+    # The Gaussian means of square-lattice cells sit within a hundredth of a radian of the angle.
+    np.testing.assert_allclose(np.angle(np.exp(1j * (angles - expected))), 0.0, atol=0.01)
+    rho = np.hypot(relative[:, 0], relative[:, 1])
+    w = scene.bell.thickness * scene.bell.height
+    assert np.all((rho > scene.bell.radius - w - bell.l0) & (rho < scene.bell.radius))
+    np.testing.assert_array_equal(bell.margin(0.0)[:: bell.root_every], roots[0])
+
+
+def test_roots_between_frames_are_c1_hermite(scene: jellysim.Scene) -> None:
+    bell = SoftBell(scene)
+    h = bell.frame_dt
+    rng = np.random.default_rng(7)
+    moved = bell.rest + 0.05 * rng.standard_normal(bell.rest.shape)
+    velocity = rng.standard_normal(bell.rest.shape)
+    bell.record(1, moved, velocity)
+    # At the frame times the records themselves.
+    p0, v0, _ = bell.roots(np.array([0.0]))
+    p1, v1, _ = bell.roots(np.array([h]))
+    record = bell.records[1]
+    np.testing.assert_allclose(p1[0], record.roots, atol=1e-12)
+    np.testing.assert_allclose(v1[0], record.velocities, atol=1e-12)
+    np.testing.assert_allclose(v0[0], 0.0, atol=1e-12)
+    # Velocity is the derivative of position (central differences inside the interval).
+    t = np.array([0.4 * h - 1e-6, 0.4 * h, 0.4 * h + 1e-6])
+    p, v, _ = bell.roots(t)
+    np.testing.assert_allclose((p[2] - p[0]) / 2e-6, v[1], rtol=1e-5, atol=1e-6)
+
+
+def test_skinned_surface_follows_rigid_motion(bell: SoftBell) -> None:
+    np.testing.assert_allclose(bell.surface(), bell.rest_surface)
+    shift = np.array([0.3, -0.2, 0.5])
+    bell.position = bell.rest + shift
+    try:
+        np.testing.assert_allclose(bell.surface(), bell.rest_surface + shift, atol=1e-12)
+    finally:
+        bell.position = bell.rest.copy()
+    outer = bell.rest_surface[1 : 1 + bell.sectors * 12]
+    relative = outer - bell.centre
+    b = bell
+    on_ellipsoid = (np.hypot(relative[:, 0], relative[:, 1]) / b.radius) ** 2 + (
+        relative[:, 2] / b.height
+    ) ** 2
+    np.testing.assert_allclose(on_ellipsoid, 1.0, atol=1e-12)
+
+
+def test_spring_time_step_is_the_explicit_limit(bell: SoftBell) -> None:
+    dt = bell.stable_dt()
+    assert 0.0 < dt < 2.0 * math.sqrt(bell.mass / (bell.stiffness * bell.muscle_stiffening))
