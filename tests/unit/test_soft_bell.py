@@ -10,6 +10,7 @@ import pytest
 
 import jellysim
 from jellysim.bell.soft import CIRCUMFERENTIAL, SoftBell
+from jellysim.bell.swimming import phase_lag
 from jellysim.fluid.geometry import FLUID
 from jellysim.simulation.fluid import fluid_particles
 
@@ -184,3 +185,19 @@ def test_skinned_surface_follows_rigid_motion(bell: SoftBell) -> None:
 def test_spring_time_step_is_the_explicit_limit(bell: SoftBell) -> None:
     dt = bell.stable_dt()
     assert 0.0 < dt < 2.0 * math.sqrt(bell.mass / (bell.stiffness * bell.muscle_stiffening))
+
+
+def test_phase_lag_recovers_a_known_lag() -> None:
+    """A speed that follows the contraction by 0.6 s, over a drift and a start-up pulse."""
+    period, lag = 2.0, 0.6
+    time = np.arange(0.0, 4 * period + 1e-9, 0.05)
+    contraction = 0.2 + 0.1 * np.sin(2 * np.pi * time / period) + 0.01 * time
+    speed = 0.3 + 0.05 * np.sin(2 * np.pi * (time - lag) / period)
+    height = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * 0.05)])
+    found = phase_lag(time, height, contraction, period)
+    assert found is not None
+    assert found.lag == pytest.approx(lag, abs=0.051)
+    assert found.correlation > 0.9  # the linear detrend takes a little of each sine
+    # Frames that do not divide the period, or no whole pulse after the first: no lag.
+    assert phase_lag(time[:30], height[:30], contraction[:30], period) is None
+    assert phase_lag(time, height, contraction, 2.03) is None

@@ -1,7 +1,7 @@
 """``bell.model = "kinematic"``: a rigid bell animated by a prescribed pulse (paper §4.2.1, Case 1).
 
 The paper animates the Brown Jelly's bell by hand and lets its margin drive the tentacle roots.
-Here the hand-keyed curves are replaced by a parametric bell (docs/theory/bell.md, Eq. B1-B8):
+Here the hand-keyed curves are replaced by a parametric bell (docs/theory/bell.md, Eq. B1-B6):
 
 - Rest shape: a dome of revolution with meridian parameter s in [0, 1] (apex to margin),
   ``rho = R sin(pi s / 2)``, ``z = H cos(pi s / 2)`` (Eq. B1), margin at z = 0 in the bell frame;

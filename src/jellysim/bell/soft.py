@@ -1,7 +1,7 @@
 """``bell.model = "mass-spring"``: the soft Moon Jelly bell of the paper's Case 2 (§4.2.1-4.2.4).
 
-The bell is a set of particles carved out of the MPS fluid lattice (docs/theory/bell.md, Eq.
-B7-B12):
+The bell is a set of particles carved out of the MPS fluid lattice (docs/theory/soft-bell.md,
+Eq. B7-B12):
 
 - Shape (Eq. B7): in the bell frame (axis +z through the tank's centre, margin plane at
   ``bell.margin_height`` above the floor), the shell between two half-ellipsoids of revolution,

@@ -51,3 +51,48 @@ def swim_cycles(
             )
         )
     return cycles
+
+
+class PhaseLag(NamedTuple):
+    """How long after the contraction the upward speed follows (s, in [0, period)), and the
+    correlation of the two at that lag."""
+
+    lag: float
+    correlation: float
+
+
+def phase_lag(
+    time: np.ndarray, height: np.ndarray, contraction: np.ndarray, period: float
+) -> PhaseLag | None:
+    """The lag (s) that best aligns the upward speed with the contraction over the whole pulses
+    after the first (a start-up transient), both detrended; None if the record holds no whole
+    pulse after the first or its frames do not divide the period.
+
+    The per-pulse peaks of :func:`swim_cycles` are fragile when the bell does not re-open fully
+    between pulses; the correlation uses every sample of a pulse."""
+    if len(time) < 3:
+        return None
+    step = float(time[1] - time[0])
+    per_period = round(period / step)
+    if per_period < 2 or abs(per_period * step - period) > 1e-6 * period:
+        return None
+    speed = np.gradient(height, time)
+    first = per_period  # the sample at t = period
+    whole = (len(time) - 1 - first) // per_period * per_period
+    if whole < per_period:
+        return None
+    window = slice(first, first + whole)
+    c = _detrended(contraction[window])
+    v = _detrended(speed[window])
+    norm = float(np.sqrt(np.dot(c, c) * np.dot(v, v)))
+    if norm == 0.0:
+        return None
+    # Circular over whole pulses: the detrended records are nearly periodic.
+    scores = np.array([np.dot(c, np.roll(v, -shift)) / norm for shift in range(per_period)])
+    best = int(np.argmax(scores))
+    return PhaseLag(best * step, float(scores[best]))
+
+
+def _detrended(values: np.ndarray) -> np.ndarray:
+    k = np.arange(len(values), dtype=np.float64)
+    return values - np.polyval(np.polyfit(k, values, 1), k)

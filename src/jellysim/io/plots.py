@@ -232,7 +232,7 @@ def thrust_plot(result: Result, path: Path) -> Path:
     """Paper Fig. 11: the mean height of the bell particles and the contraction ratio of the
     bell's radius against time, each pulse's lag from peak contraction to peak upward speed
     marked."""
-    from jellysim.bell.swimming import swim_cycles
+    from jellysim.bell.swimming import phase_lag, swim_cycles
 
     plt = _pyplot()
     f = result.file
@@ -248,15 +248,20 @@ def thrust_plot(result: Result, path: Path) -> Path:
     other.plot(time, contraction, color="tab:blue", lw=1.2, ls="--", label="contraction ratio")
     other.set_ylabel("contraction ratio of the radius", color="tab:blue")
     cycles = swim_cycles(time, height, contraction, period)
-    for cycle in cycles:
-        ax.axvspan(cycle.peak_contraction_time, cycle.peak_speed_time, color="0.85", lw=0)
+    lag = phase_lag(time, height, contraction, period)
+    if lag is not None:
+        # Shade from each pulse's peak contraction to the upward-speed peak that follows it.
+        for cycle in cycles[1:]:  # the lag is measured after the first pulse
+            start = cycle.peak_contraction_time
+            ax.axvspan(start, min(start + lag.lag, time[-1]), color="0.85", lw=0)
     if cycles:
         mean_rise = float(np.mean([c.rise for c in cycles]))
-        mean_lag = float(np.mean([c.lag for c in cycles]))
-        title = f"rise {mean_rise:.3g} m per pulse; lag contraction -> speed {mean_lag:.2f} s"
+        title = f"rise {mean_rise:.3g} m per pulse"
+        if lag is not None:
+            title += f"; upward speed peaks {lag.lag:.2f} s after the contraction (shaded)"
     else:
         title = "shorter than one pulse"
-    ax.set_title(f"{result.scene.name}: {title} (cf. paper Fig. 11)", fontsize=10)
+    ax.set_title(f"{result.scene.name} (cf. paper Fig. 11)\n{title}", fontsize=9)
     ax.grid(alpha=0.3)
     lines = ax.get_lines() + other.get_lines()
     ax.legend(lines, [line.get_label() for line in lines], loc="upper left", fontsize=8)

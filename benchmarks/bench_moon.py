@@ -1,0 +1,104 @@
+"""The moon-jelly preset (issue 6): wall time for three pulses, per phase.
+
+    .venv/bin/python benchmarks/bench_moon.py [--seconds 0.5] [--threads N] [--set KEY=VALUE ...]
+
+The preset at its own resolution (l0 = 0.16 m: 56,524 water and 1,076 bell particles, 10
+tentacles) is simulated for ``--seconds`` of simulated time after the kernels are compiled or
+loaded from the cache (not timed), and the wall time of every phase is reported per MPS step:
+the fluid's phases (neighbours, explicit, PPE assembly, solve, correction), the springs, the
+tentacles and the rest (margin records, bookkeeping). ``--seconds`` equal to three periods
+measures the whole target; a shorter run projects it: dt is the springs' fixed limit
+(``bell_spring_dt``) as long as the fluid's Courant limit is longer, so the steps of three pulses
+are known exactly, and the projection is steps x the measured cost of a step (stated as such).
+Results are not written to disk.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import time
+
+import numba
+import numpy as np
+
+import jellysim
+from jellysim.simulation import make_simulation
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seconds", type=float, default=0.5)
+    parser.add_argument("--threads", type=int, default=numba.config.NUMBA_NUM_THREADS)
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    args = parser.parse_args()
+    numba.set_num_threads(args.threads)
+    overrides: dict[str, object] = {}
+    for item in args.set:
+        key, value = item.split("=", 1)
+        overrides[key] = float(value)
+    scene = jellysim.load_scene("moon-jelly", overrides)
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores; numba {numba.__version__}, "
+        f"threads {numba.get_num_threads()}"
+    )
+    simulation = make_simulation(scene)
+    print(simulation.describe())
+    simulation.prepare()
+
+    frames = max(1, round(args.seconds * scene.fps))
+    steps = 0
+    springs = tentacles = 0.0
+    bell = simulation.bell
+    spring_forces, tentacle_step = bell.spring_forces, simulation.tentacles.step_frame
+
+    def timed_springs(*a: object) -> None:
+        nonlocal springs
+        start = time.perf_counter()
+        spring_forces(*a)  # type: ignore[arg-type]
+        springs += time.perf_counter() - start
+
+    def timed_tentacles() -> None:
+        nonlocal tentacles
+        start = time.perf_counter()
+        tentacle_step()
+        tentacles += time.perf_counter() - start
+
+    bell.spring_forces = timed_springs  # type: ignore[method-assign]
+    simulation.tentacles.step_frame = timed_tentacles  # type: ignore[method-assign]
+    iterations = []
+    start = time.perf_counter()
+    for _ in range(frames):
+        simulation.step_frame()
+        steps += simulation.last["steps"]
+        iterations.append(simulation.last["iterations"])
+    wall = time.perf_counter() - start
+
+    fluid = sum(simulation.seconds.values())
+    phases = {**simulation.seconds, "springs": springs, "tentacles": tentacles}
+    phases["other"] = wall - fluid - springs - tentacles
+    simulated = frames / scene.fps
+    print(
+        f"{simulated:g} s simulated in {wall:.1f} s: {steps} MPS steps "
+        f"({steps / wall:.2f} steps/s), PPE iterations {np.mean(iterations):.0f} (mean, last step "
+        f"of each frame)"
+    )
+    print("per step: " + ", ".join(f"{k} {1000 * v / steps:.0f} ms" for k, v in phases.items()))
+    three = 3 * scene.bell.period
+    if simulated >= three - 1e-9:
+        print(f"three pulses ({three:g} s): {wall / 60:.1f} min measured")
+    else:
+        dt = simulation.spring_dt
+        per_frame = math.ceil((1.0 / scene.fps) / dt - 1e-9)
+        needed = per_frame * round(three * scene.fps)
+        print(
+            f"three pulses ({three:g} s): {needed} steps of at most {dt:.4g} s "
+            f"({per_frame} per frame); projected {needed * wall / steps / 60:.1f} min "
+            f"at the measured {wall / steps:.2f} s per step"
+        )
+
+
+if __name__ == "__main__":
+    main()
