@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jellysim
-from jellysim.bell.soft import CIRCUMFERENTIAL, SoftBell
+from jellysim.bell.soft import CIRCUMFERENTIAL, SPRING_SAFETY, SoftBell
 from jellysim.bell.swimming import phase_lag
 from jellysim.fluid.geometry import FLUID
 from jellysim.simulation.fluid import fluid_particles
@@ -183,8 +183,38 @@ def test_skinned_surface_follows_rigid_motion(bell: SoftBell) -> None:
 
 
 def test_spring_time_step_is_the_explicit_limit(bell: SoftBell) -> None:
-    dt = bell.stable_dt()
-    assert 0.0 < dt < 2.0 * math.sqrt(bell.mass / (bell.stiffness * bell.muscle_stiffening))
+    """dt <= SPRING_SAFETY x 2 / omega_max with omega_max from the stiffness matrix's largest
+    eigenvalue at rest (the bound is conservative, not wildly), at several muscle activations."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import eigsh
+
+    pairs = bell.springs.pairs
+    e = bell.rest[pairs[:, 1]] - bell.rest[pairs[:, 0]]
+    e /= np.linalg.norm(e, axis=1)[:, None]
+    previous = math.inf
+    for a in (0.0, 0.3, 1.0):
+        k = bell.stiffness * np.where(
+            bell.springs.muscle, 1.0 + (bell.muscle_stiffening - 1.0) * a, 1.0
+        )
+        block = k[:, None, None] * e[:, :, None] * e[:, None, :]  # (S, 3, 3)
+        rows, cols, values = [], [], []
+        for (i, j), b in zip(pairs, block, strict=True):
+            for p, q, sign in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
+                r, c = np.meshgrid(3 * p + np.arange(3), 3 * q + np.arange(3), indexing="ij")
+                rows.append(r.ravel())
+                cols.append(c.ravel())
+                values.append(sign * b.ravel())
+        n = 3 * len(bell.rest)
+        stiffness = coo_matrix(
+            (np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+        ).tocsr()
+        omega = math.sqrt(float(eigsh(stiffness, k=1, which="LA")[0][0]) / bell.mass)
+        dt = bell.stable_dt(a)
+        assert dt <= SPRING_SAFETY * 2.0 / omega * (1 + 1e-9)
+        assert dt >= 0.35 * SPRING_SAFETY * 2.0 / omega  # twice the block bound: 0.39-0.5
+        assert dt < previous  # a stiffer muscle, a shorter step
+        previous = dt
+    assert bell.stable_dt() == bell.stable_dt(1.0)
 
 
 def test_phase_lag_recovers_a_known_lag() -> None:

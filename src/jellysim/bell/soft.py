@@ -145,6 +145,14 @@ class SoftBell(RootDriver):
         self._tensions = np.zeros((len(self.springs.pairs), 3))
         self._stiffness = np.full(len(self.springs.pairs), self.stiffness)
         self._rest_length = self.springs.rest_length.copy()
+        # Per particle: the stiffness of its passive springs and of its muscle springs at rest.
+        muscle_share = self.springs.muscle.astype(np.float64)
+        self._passive_total = np.zeros(len(self.rest))
+        self._muscle_total = np.zeros(len(self.rest))
+        for column in (0, 1):
+            ends = self.springs.pairs[:, column]
+            np.add.at(self._passive_total, ends, self.stiffness * (1.0 - muscle_share))
+            np.add.at(self._muscle_total, ends, self.stiffness * muscle_share)
 
         # Margin sampling (Eq. B10): the lowest layer, and the third layer for the clamp angle.
         sectors = sector_count(max(self.tentacles, 1), 0)
@@ -270,15 +278,14 @@ class SoftBell(RootDriver):
         s = self.springs
         kernels.gather_forces(self._tensions, s.start, s.edges, s.signs, out)
 
-    def stable_dt(self) -> float:
-        """The explicit stage's limit for the springs at full stiffening (s):
-        ``SPRING_SAFETY x 2 / omega_max``, ``omega_max^2 <= max_i 4 sum_e k_e / m`` (Gershgorin)."""
-        k = np.where(
-            self.springs.muscle, self.stiffness * max(self.muscle_stiffening, 1.0), self.stiffness
-        )
-        total = np.zeros(len(self.rest))
-        np.add.at(total, self.springs.pairs[:, 0], k)
-        np.add.at(total, self.springs.pairs[:, 1], k)
+    def stable_dt(self, activation: float = 1.0) -> float:
+        """The explicit stage's limit for the springs (s) with the muscle at ``activation`` (the
+        run uses full stiffening throughout): ``SPRING_SAFETY x 2 / omega``, ``omega^2 = max_i 4
+        sum_e k_e / m``, twice the block Gershgorin bound on the stiffness matrix's largest
+        eigenvalue (each spring's 3 x 3 block ``k e e^T`` has norm k, so ``omega_max^2 <= max_i
+        2 sum_e k_e / m`` whatever the springs' directions): docs/theory/soft-bell.md §4."""
+        factor = 1.0 + max(self.muscle_stiffening - 1.0, 0.0) * activation
+        total = self._passive_total + factor * self._muscle_total
         omega = math.sqrt(4.0 * float(total.max(initial=0.0)) / self.mass)
         return SPRING_SAFETY * 2.0 / omega if omega > 0 else math.inf
 
