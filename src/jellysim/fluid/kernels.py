@@ -75,12 +75,13 @@ def weight(r: float, re: float) -> float:
 
 @njit(cache=True)
 def _cell_offsets(dim: int) -> np.ndarray:
-    """The 3^D offsets of a cell's neighbourhood, (3^D, D) int64, in a fixed order."""
-    count = 3**dim
-    out = np.empty((count, dim), dtype=np.int64)
+    """The 3^(D-1) offsets of a cell's neighbourhood across axes 1..D-1, (3^(D-1), D - 1) int64,
+    in a fixed order (axis 0 is scanned as one run of three cells, contiguous in the sort)."""
+    count = 3 ** (dim - 1)
+    out = np.empty((count, dim - 1), dtype=np.int64)
     for c in range(count):
         rest = c
-        for k in range(dim):
+        for k in range(dim - 1):
             out[c, k] = rest % 3 - 1
             rest //= 3
     return out
@@ -96,6 +97,7 @@ def _scan_cells(
     offsets: np.ndarray,
     counts: np.ndarray,
     members: np.ndarray,
+    member_position: np.ndarray,
     radius2: float,
     index: np.ndarray,
     distance: np.ndarray,
@@ -103,28 +105,35 @@ def _scan_cells(
 ) -> int:
     """Particle i's neighbours closer than sqrt(radius2) in the 3^D cells around its own, in
     cell order then member order; written from ``slot`` on into ``index`` and ``distance`` unless
-    ``slot`` is negative (count only). Returns how many there are."""
+    ``slot`` is negative (count only). Returns how many there are.
+
+    Cells are numbered with axis 0 fastest, so the three cells along axis 0 of each of the
+    3^(D-1) offsets across the other axes are one run of ``members`` (and of
+    ``member_position``, the members' positions in that order)."""
     dim = position.shape[1]
     found = 0
+    x = coords[i, 0]
+    first_x = max(x - 1, 0)
+    last_x = min(x + 1, shape[0] - 1)
     for o in range(offsets.shape[0]):
         c = 0
         inside = True
-        for k in range(dim):
-            q = coords[i, k] + offsets[o, k]
+        for k in range(1, dim):
+            q = coords[i, k] + offsets[o, k - 1]
             if q < 0 or q >= shape[k]:
                 inside = False
             c += q * stride[k]
         if not inside:
             continue
-        for m in range(counts[c], counts[c + 1]):
-            j = members[m]
-            if j == i:
-                continue
+        for m in range(counts[c + first_x], counts[c + last_x + 1]):
             r2 = 0.0
             for k in range(dim):
-                d = position[j, k] - position[i, k]
+                d = member_position[m, k] - position[i, k]
                 r2 += d * d
             if r2 < radius2:
+                j = members[m]
+                if j == i:
+                    continue
                 if slot >= 0:
                     index[slot + found] = j
                     distance[slot + found] = math.sqrt(r2)
@@ -134,15 +143,17 @@ def _scan_cells(
 
 @njit(cache=True, parallel=True)
 def neighbour_list(
-    position: np.ndarray, alive: np.ndarray, radius: float
+    position: np.ndarray, alive: np.ndarray, rows: np.ndarray, radius: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cell-list search: all pairs of live particles closer than ``radius`` (m).
+    """Cell-list search: for every live particle i with ``rows[i]`` ((N,) bool), all live
+    particles closer than ``radius`` (m); other rows are empty (such particles still appear as
+    neighbours of others).
 
     Cells of side ``radius`` over the live particles' bounding box, filled by a stable counting
-    sort; particle i scans the 3^D cells around its own. Returns the arrays of
-    :class:`Neighbours` ``(start, indices, distance)``; within a row the order is fixed (cell order,
-    then particle index). The arrays are allocated here because their sizes depend on the
-    configuration.
+    sort that also copies the members' positions in cell order; particle i scans the 3^D cells
+    around its own. Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
+    within a row the order is fixed (cell order, then particle index). The arrays are allocated
+    here because their sizes depend on the configuration.
     """
     n, dim = position.shape
     lower = np.full(dim, np.inf)
@@ -177,9 +188,13 @@ def neighbour_list(
         counts[c + 1] += counts[c]
     fill = counts[:-1].copy()
     members = np.empty(counts[n_cells], dtype=np.int64)
+    member_position = np.empty((counts[n_cells], dim))
     for i in range(n):
         if cell_of[i] >= 0:
-            members[fill[cell_of[i]]] = i
+            m = fill[cell_of[i]]
+            members[m] = i
+            for k in range(dim):
+                member_position[m, k] = position[i, k]
             fill[cell_of[i]] += 1
     offsets = _cell_offsets(dim)
     radius2 = radius * radius
@@ -188,20 +203,20 @@ def neighbour_list(
     no_index = np.empty(0, dtype=np.int64)
     no_distance = np.empty(0)
     for i in prange(n):  # first pass: count each row
-        if cell_of[i] >= 0:
+        if cell_of[i] >= 0 and rows[i]:
             row_count[i + 1] = _scan_cells(
-                i, position, coords, shape, stride, offsets, counts, members, radius2,
-                no_index, no_distance, -1,
+                i, position, coords, shape, stride, offsets, counts, members, member_position,
+                radius2, no_index, no_distance, -1,
             )  # fmt: skip
     for i in range(n):
         row_count[i + 1] += row_count[i]
     index = np.empty(row_count[n], dtype=np.int64)
     distance = np.empty(row_count[n])
     for i in prange(n):  # second pass: fill each row
-        if cell_of[i] >= 0:
+        if cell_of[i] >= 0 and rows[i]:
             _scan_cells(
-                i, position, coords, shape, stride, offsets, counts, members, radius2,
-                index, distance, row_count[i],
+                i, position, coords, shape, stride, offsets, counts, members, member_position,
+                radius2, index, distance, row_count[i],
             )  # fmt: skip
     return row_count, index, distance
 
@@ -214,7 +229,8 @@ def number_density(
     neighbours: Neighbours, alive: np.ndarray, re: float, out: np.ndarray, count: np.ndarray
 ) -> None:
     """Particle number density, Eq. (F2): ``n_i = sum_j w(|r_j - r_i|, r_e)`` over live particles
-    of every kind (dummies included) into ``out``; ``count`` receives the number of neighbours
+    of every kind (dummies included) into ``out`` (0 for particles without a neighbour-list row);
+    ``count`` receives the number of neighbours
     closer than r_e (for neighbour-count surface detection)."""
     for i in prange(alive.shape[0]):
         total = 0.0

@@ -183,7 +183,8 @@ class MPSSolver:
 
     State (N particles, D = ``params.dim``): ``position`` (N, D) m, ``velocity`` (N, D) m/s,
     ``pressure`` (N,) Pa (also the warm start of the next solve), ``number_density`` (N,)
-    dimensionless (n* of the last step), ``alive`` (N,) bool, ``kind`` (N,) int8, ``time`` s.
+    dimensionless (n* of the last step; 0 for dummies, which get no neighbour-list row),
+    ``alive`` (N,) bool, ``kind`` (N,) int8, ``time`` s.
     Walls and dummies keep their velocity (zero for a fixed tank) and position. Dummy particles
     only add number density: their pressure is 0 and they are ignored by the gradient. Negative
     pressures of the solution are clipped to 0.
@@ -300,9 +301,11 @@ class MPSSolver:
             stats.seconds[name] = stats.seconds.get(name, 0.0) + now - clock
             clock = now
 
-        # Neighbours at r^k
+        # Neighbours at r^k: rows for the particles the explicit stage moves (and, for the mixed
+        # source, the walls, whose n^k enters the PPE)
+        moving = self.kind == FLUID if p.source == "standard" else self.kind != DUMMY
         nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            *kernels.neighbour_list(self.position, self.alive, moving, self.search_radius),
             self.search_radius,
         )
         if p.source == "mixed":  # n^k for the mixed source [Tanaka & Masunaga 2010]
@@ -386,8 +389,10 @@ class MPSSolver:
         ``clock`` (if given) is called with the phase names "neighbours" and "assembly"."""
         p = self.params
         c = self.constants
+        # Dummies need no row: they only complete the number density of their neighbours.
+        solid = self.alive & (self.kind != DUMMY)
         nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            *kernels.neighbour_list(self.position, self.alive, solid, self.search_radius),
             self.search_radius,
         )
         kernels.number_density(
@@ -395,7 +400,6 @@ class MPSSolver:
         )
         if clock is not None:
             clock("neighbours")
-        solid = self.alive & (self.kind != DUMMY)
         surface = self.number_density < p.surface_threshold * c.n0
         if p.surface == "neighbour-count":
             count0 = self.reference["number_density"].count
