@@ -484,33 +484,27 @@ def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
     included, receive L (upper entries are left untouched). Row by row:
     ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
     ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
+
+    Row i's finished entries are scattered into a dense row (zero off the pattern), so the sum
+    over m runs over row k's pattern alone, in column order, without merging the two rows.
     """
     indptr = matrix.indptr
     indices = matrix.indices
     diagonal = matrix.diagonal
+    dense_row = np.zeros(indptr.shape[0] - 1)
     for i in range(indptr.shape[0] - 1):
         start = indptr[i]
         for p in range(start, diagonal[i]):
             k = indices[p]
             total = matrix.data[p]
-            # merge the lower parts of rows i (before column k) and k (before its diagonal)
-            a = start
-            b = indptr[k]
-            while a < p and b < diagonal[k]:
-                ca = indices[a]
-                cb = indices[b]
-                if ca == cb:
-                    total -= out[a] * out[b]
-                    a += 1
-                    b += 1
-                elif ca < cb:
-                    a += 1
-                else:
-                    b += 1
+            for b in range(indptr[k], diagonal[k]):
+                total -= dense_row[indices[b]] * out[b]
             out[p] = total / out[diagonal[k]]
+            dense_row[k] = out[p]
         pivot = matrix.data[diagonal[i]] * (1.0 + shift)
         for p in range(start, diagonal[i]):
             pivot -= out[p] * out[p]
+            dense_row[indices[p]] = 0.0
         if not pivot > 0.0:
             return False
         out[diagonal[i]] = math.sqrt(pivot)
