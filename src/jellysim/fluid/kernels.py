@@ -428,14 +428,14 @@ def assemble_poisson(
         indptr[row + 1] = found
     for row in range(n_rows):
         indptr[row + 1] += indptr[row]
-    indices = np.empty(indptr[n_rows], dtype=np.int64)
-    data = np.empty(indptr[n_rows])
-    diagonal = np.empty(n_rows, dtype=np.int64)
+    # Rows in neighbour order, the diagonal first
+    unsorted_indices = np.empty(indptr[n_rows], dtype=np.int64)
+    unsorted_data = np.empty(indptr[n_rows])
     for row in prange(n_rows):
         i = particle_of[row]
         start = indptr[row]
         end = start + 1
-        indices[start] = row
+        unsorted_indices[start] = row
         total = 0.0
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             r = neighbours.distance[m]
@@ -445,24 +445,26 @@ def assemble_poisson(
             a = coefficient * weight(r, re)
             total += a
             if row_of[j] >= 0:
-                indices[end] = row_of[j]
-                data[end] = -a
+                unsorted_indices[end] = row_of[j]
+                unsorted_data[end] = -a
                 end += 1
-        data[start] = total + diagonal_shift
-        # Insertion sort of the row by column (rows are short).
-        for p in range(start + 1, end):
-            column = indices[p]
-            value = data[p]
-            q = p - 1
-            while q >= start and indices[q] > column:
-                indices[q + 1] = indices[q]
-                data[q + 1] = data[q]
-                q -= 1
-            indices[q + 1] = column
-            data[q + 1] = value
-        for p in range(start, end):
-            if indices[p] == row:
-                diagonal[row] = p
+        unsorted_data[start] = total + diagonal_shift
+    # Sorted columns by transposition: A is symmetric to the last bit (r_ij and r_ji are the
+    # same floating-point numbers), and sweeping the rows in order appends to each transposed
+    # row its columns in increasing order.
+    indices = np.empty(indptr[n_rows], dtype=np.int64)
+    data = np.empty(indptr[n_rows])
+    diagonal = np.empty(n_rows, dtype=np.int64)
+    fill = indptr[:-1].copy()
+    for row in range(n_rows):
+        for p in range(indptr[row], indptr[row + 1]):
+            column = unsorted_indices[p]
+            q = fill[column]
+            fill[column] += 1
+            indices[q] = row
+            data[q] = unsorted_data[p]
+            if column == row:
+                diagonal[row] = q
     return indptr, indices, data, diagonal
 
 
