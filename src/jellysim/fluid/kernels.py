@@ -54,12 +54,16 @@ class Neighbours(NamedTuple):
 
 class Matrix(NamedTuple):
     """Square sparse matrix in CSR with sorted column indices; ``diagonal[i]`` is the position
-    of entry (i, i) in ``data``."""
+    of entry (i, i) in ``data``. ``blocks`` = (b0, b1): rows ``[0, b0)`` and ``[b0, b1)`` are
+    two uncoupled blocks (no entry joins them), rows from b1 on the separator coupled to both;
+    the IC(0) factor and its triangular solves treat the two blocks in parallel. (n, n): one
+    block."""
 
     indptr: np.ndarray  # (n + 1,) int64
     indices: np.ndarray  # (nnz,) int64
     data: np.ndarray  # (nnz,) float64
     diagonal: np.ndarray  # (n,) int64
+    blocks: np.ndarray  # (2,) int64
 
 
 @njit(cache=True)
@@ -379,16 +383,70 @@ def velocity_divergence(
 
 
 @njit(cache=True)
-def number_unknowns(unknown: np.ndarray, out: np.ndarray) -> int:
-    """Row number of each unknown particle (-1 for the others) into ``out``; returns the count."""
+def number_unknowns(
+    unknown: np.ndarray, position: np.ndarray, width: float, min_rows: int, out: np.ndarray
+) -> np.ndarray:
+    """Row number of each unknown particle (-1 for the others) into ``out``, in the order of
+    :class:`Matrix`'s ``blocks``; returns (b0, b1, n) (int64).
+
+    With fewer than ``min_rows`` unknowns, one block in particle order. Otherwise the unknowns
+    are cut at the median of their coordinate along their longest extent: block 0 below
+    ``median - width / 2``, block 1 from ``median + width / 2`` on, the separator between; each
+    numbered in particle order. With ``width`` the coupling radius (m), no pair of block 0 and
+    block 1 lies closer than it.
+    """
+    n, dim = position.shape
     count = 0
-    for i in range(unknown.shape[0]):
+    for i in range(n):
         if unknown[i]:
-            out[i] = count
             count += 1
+    parts = np.array([count, count, count], dtype=np.int64)
+    if count < max(min_rows, 1):
+        row = 0
+        for i in range(n):
+            if unknown[i]:
+                out[i] = row
+                row += 1
+            else:
+                out[i] = -1
+        return parts
+    lower = np.full(dim, np.inf)
+    upper = np.full(dim, -np.inf)
+    for i in range(n):
+        if unknown[i]:
+            for k in range(dim):
+                lower[k] = min(lower[k], position[i, k])
+                upper[k] = max(upper[k], position[i, k])
+    axis = np.argmax(upper - lower)
+    coordinate = np.empty(count)
+    row = 0
+    for i in range(n):
+        if unknown[i]:
+            coordinate[row] = position[i, axis]
+            row += 1
+    middle = np.median(coordinate)
+    block = np.full(n, -1, dtype=np.int64)
+    size = np.zeros(3, dtype=np.int64)
+    for i in range(n):
+        if unknown[i]:
+            x = position[i, axis]
+            if x < middle - 0.5 * width:
+                block[i] = 0
+            elif x >= middle + 0.5 * width:
+                block[i] = 1
+            else:
+                block[i] = 2
+            size[block[i]] += 1
+    fill = np.array([0, size[0], size[0] + size[1]], dtype=np.int64)
+    for i in range(n):
+        if block[i] >= 0:
+            out[i] = fill[block[i]]
+            fill[block[i]] += 1
         else:
             out[i] = -1
-    return count
+    parts[0] = size[0]
+    parts[1] = size[0] + size[1]
+    return parts
 
 
 @njit(cache=True, parallel=True)
@@ -479,22 +537,15 @@ def multiply(matrix: Matrix, x: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
-    """IC(0): ``L L^T ~ A + shift diag(A)`` with L on the lower pattern of A, Eq. (F11).
-
-    ``out`` has A's layout (``matrix.data``'s shape); its lower-triangle entries, diagonal
-    included, receive L (upper entries are left untouched). Row by row:
-    ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
-    ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
-
-    Row i's finished entries are scattered into a dense row (zero off the pattern), so the sum
-    over m runs over row k's pattern alone, in column order, without merging the two rows.
-    """
+def _factor_rows(
+    matrix: Matrix, shift: float, first: int, last: int, dense_row: np.ndarray, out: np.ndarray
+) -> bool:
+    """IC(0) rows ``[first, last)`` of :func:`incomplete_cholesky`, given the rows they refer
+    to; ``dense_row`` (n,) zeros, left zero."""
     indptr = matrix.indptr
     indices = matrix.indices
     diagonal = matrix.diagonal
-    dense_row = np.zeros(indptr.shape[0] - 1)
-    for i in range(indptr.shape[0] - 1):
+    for i in range(first, last):
         start = indptr[i]
         for p in range(start, diagonal[i]):
             k = indices[p]
@@ -513,23 +564,65 @@ def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
     return True
 
 
+@njit(cache=True, parallel=True)
+def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
+    """IC(0): ``L L^T ~ A + shift diag(A)`` with L on the lower pattern of A, Eq. (F11).
+
+    ``out`` has A's layout (``matrix.data``'s shape); its lower-triangle entries, diagonal
+    included, receive L (upper entries are left untouched). Row by row:
+    ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
+    ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
+
+    Row i's finished entries are scattered into a dense row (zero off the pattern), so the sum
+    over m runs over row k's pattern alone, in column order, without merging the two rows. The
+    two blocks of ``matrix.blocks`` are factored in parallel, then the separator.
+    """
+    n = matrix.indptr.shape[0] - 1
+    bounds = np.array([0, matrix.blocks[0], matrix.blocks[1]], dtype=np.int64)
+    ok = np.ones(2, dtype=np.bool_)
+    for block in prange(2):
+        dense_row = np.zeros(n)
+        ok[block] = _factor_rows(matrix, shift, bounds[block], bounds[block + 1], dense_row, out)
+    if not (ok[0] and ok[1]):
+        return False
+    return _factor_rows(matrix, shift, matrix.blocks[1], n, np.zeros(n), out)
+
+
 @njit(cache=True)
+def _forward(
+    matrix: Matrix, factor: np.ndarray, r: np.ndarray, z: np.ndarray, first: int, last: int
+) -> None:
+    """Forward substitution ``L z = r`` on rows ``[first, last)``."""
+    for i in range(first, last):
+        total = r[i]
+        for p in range(matrix.indptr[i], matrix.diagonal[i]):
+            total -= factor[p] * z[matrix.indices[p]]
+        z[i] = total / factor[matrix.diagonal[i]]
+
+
+@njit(cache=True)
+def _backward(matrix: Matrix, factor: np.ndarray, z: np.ndarray, first: int, last: int) -> None:
+    """Backward substitution ``L^T z = z`` by columns, rows ``last - 1`` down to ``first``."""
+    for i in range(last - 1, first - 1, -1):
+        z[i] /= factor[matrix.diagonal[i]]
+        for p in range(matrix.indptr[i], matrix.diagonal[i]):
+            z[matrix.indices[p]] -= factor[p] * z[i]
+
+
+@njit(cache=True, parallel=True)
 def _precondition(matrix: Matrix, factor: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
     """``z = (L L^T)^-1 r``: forward substitution on L's rows, then backward substitution on
-    L^T by columns (row i of L is column i of L^T), so no transpose is stored."""
-    indptr = matrix.indptr
-    indices = matrix.indices
-    diagonal = matrix.diagonal
+    L^T by columns (row i of L is column i of L^T), so no transpose is stored. The two blocks
+    of ``matrix.blocks`` in parallel: forward blocks then separator, backward separator (which
+    updates both blocks) then blocks."""
     n = r.shape[0]
-    for i in range(n):
-        total = r[i]
-        for p in range(indptr[i], diagonal[i]):
-            total -= factor[p] * z[indices[p]]
-        z[i] = total / factor[diagonal[i]]
-    for i in range(n - 1, -1, -1):
-        z[i] /= factor[diagonal[i]]
-        for p in range(indptr[i], diagonal[i]):
-            z[indices[p]] -= factor[p] * z[i]
+    bounds = np.array([0, matrix.blocks[0], matrix.blocks[1]], dtype=np.int64)
+    for block in prange(2):
+        _forward(matrix, factor, r, z, bounds[block], bounds[block + 1])
+    _forward(matrix, factor, r, z, matrix.blocks[1], n)
+    _backward(matrix, factor, z, matrix.blocks[1], n)
+    for block in prange(2):
+        _backward(matrix, factor, z, bounds[block], bounds[block + 1])
 
 
 @njit(cache=True)
