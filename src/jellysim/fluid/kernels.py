@@ -77,17 +77,25 @@ def weight(r: float, re: float) -> float:
 # ---------------------------------------------------------------------------- neighbour search
 
 
+# Cells of side radius / CELLS_PER_RADIUS: particle i scans the (2 CELLS_PER_RADIUS + 1)^D cells
+# around its own, a volume of (2 + 1 / CELLS_PER_RADIUS)^D radius^D (27 radius^3 with cells of
+# side radius, 15.6 with half that).
+CELLS_PER_RADIUS = 2
+
+
 @njit(cache=True)
-def _cell_offsets(dim: int) -> np.ndarray:
-    """The 3^(D-1) offsets of a cell's neighbourhood across axes 1..D-1, (3^(D-1), D - 1) int64,
-    in a fixed order (axis 0 is scanned as one run of three cells, contiguous in the sort)."""
-    count = 3 ** (dim - 1)
+def _cell_offsets(dim: int, reach: int) -> np.ndarray:
+    """The (2 reach + 1)^(D-1) offsets of a cell's neighbourhood across axes 1..D-1,
+    ((2 reach + 1)^(D-1), D - 1) int64, in a fixed order (axis 0 is scanned as one run of
+    2 reach + 1 cells, contiguous in the sort)."""
+    side = 2 * reach + 1
+    count = side ** (dim - 1)
     out = np.empty((count, dim - 1), dtype=np.int64)
     for c in range(count):
         rest = c
         for k in range(dim - 1):
-            out[c, k] = rest % 3 - 1
-            rest //= 3
+            out[c, k] = rest % side - reach
+            rest //= side
     return out
 
 
@@ -107,18 +115,18 @@ def _scan_cells(
     distance: np.ndarray,
     slot: int,
 ) -> int:
-    """Particle i's neighbours closer than sqrt(radius2) in the 3^D cells around its own, in
+    """Particle i's neighbours closer than sqrt(radius2) in the cells around its own, in
     cell order then member order; written from ``slot`` on into ``index`` and ``distance`` unless
     ``slot`` is negative (count only). Returns how many there are.
 
-    Cells are numbered with axis 0 fastest, so the three cells along axis 0 of each of the
-    3^(D-1) offsets across the other axes are one run of ``members`` (and of
-    ``member_position``, the members' positions in that order)."""
+    Cells are numbered with axis 0 fastest, so the cells along axis 0 of each of the offsets
+    across the other axes are one run of ``members`` (and of ``member_position``, the members'
+    positions in that order)."""
     dim = position.shape[1]
     found = 0
     x = coords[i, 0]
-    first_x = max(x - 1, 0)
-    last_x = min(x + 1, shape[0] - 1)
+    first_x = max(x - CELLS_PER_RADIUS, 0)
+    last_x = min(x + CELLS_PER_RADIUS, shape[0] - 1)
     for o in range(offsets.shape[0]):
         c = 0
         inside = True
@@ -153,9 +161,10 @@ def neighbour_list(
     particles closer than ``radius`` (m); other rows are empty (such particles still appear as
     neighbours of others).
 
-    Cells of side ``radius`` over the live particles' bounding box, filled by a stable counting
-    sort that also copies the members' positions in cell order; particle i scans the 3^D cells
-    around its own. Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
+    Cells of side ``radius / CELLS_PER_RADIUS`` over the live particles' bounding box, filled by
+    a stable counting sort that also copies the members' positions in cell order; particle i
+    scans the cells within ``CELLS_PER_RADIUS`` of its own along each axis.
+    Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
     within a row the order is fixed (cell order, then particle index). The arrays are allocated
     here because their sizes depend on the configuration.
     """
@@ -167,7 +176,7 @@ def neighbour_list(
             for k in range(dim):
                 lower[k] = min(lower[k], position[i, k])
                 upper[k] = max(upper[k], position[i, k])
-    inverse = 1.0 / radius
+    inverse = CELLS_PER_RADIUS / radius
     shape = np.ones(dim, dtype=np.int64)
     for k in range(dim):
         if upper[k] >= lower[k]:
@@ -200,7 +209,7 @@ def neighbour_list(
             for k in range(dim):
                 member_position[m, k] = position[i, k]
             fill[cell_of[i]] += 1
-    offsets = _cell_offsets(dim)
+    offsets = _cell_offsets(dim, CELLS_PER_RADIUS)
     radius2 = radius * radius
 
     row_count = np.zeros(n + 1, dtype=np.int64)
