@@ -66,6 +66,23 @@ class Matrix(NamedTuple):
     blocks: np.ndarray  # (2,) int64
 
 
+class Factor(NamedTuple):
+    """The IC(0) factor L as the triangular solves read it: the strict lower triangle of L by
+    rows, that of L^T (the strict upper triangle) by rows from the last to the first, so that
+    both substitutions stream through memory forwards, and 1 / L_ii. Off-diagonal entries are
+    stored in single precision with 32-bit column indices: the solves are bound by memory
+    bandwidth, and rounding L to 7 digits changes a preconditioner that only approximates A
+    anyway (the solve's accuracy is set by the double-precision CG residual)."""
+
+    lower_start: np.ndarray  # (n + 1,) int64
+    lower_indices: np.ndarray  # (nnz_lower,) int32
+    lower_data: np.ndarray  # (nnz_lower,) float32
+    upper_start: np.ndarray  # (n + 1,) int64, row n - 1 - t at t
+    upper_indices: np.ndarray  # (nnz_lower,) int32
+    upper_data: np.ndarray  # (nnz_lower,) float32
+    inverse_diagonal: np.ndarray  # (n,) float64
+
+
 @njit(cache=True)
 def weight(r: float, re: float) -> float:
     """Eq. (F1): ``w = r_e / r - 1`` for ``0 < r < r_e``, else 0 (dimensionless)."""
@@ -547,10 +564,17 @@ def multiply(matrix: Matrix, x: np.ndarray, out: np.ndarray) -> None:
 
 @njit(cache=True)
 def _factor_rows(
-    matrix: Matrix, shift: float, first: int, last: int, dense_row: np.ndarray, out: np.ndarray
+    matrix: Matrix,
+    shift: float,
+    first: int,
+    last: int,
+    dense_row: np.ndarray,
+    upper_fill: np.ndarray,
+    out: np.ndarray,
 ) -> bool:
     """IC(0) rows ``[first, last)`` of :func:`incomplete_cholesky`, given the rows they refer
-    to; ``dense_row`` (n,) zeros, left zero."""
+    to; ``dense_row`` (n,) zeros, left zero; ``upper_fill`` (n,) the next free upper entry of
+    each row, where L_ik is copied as (L^T)_ki."""
     indptr = matrix.indptr
     indices = matrix.indices
     diagonal = matrix.diagonal
@@ -563,6 +587,9 @@ def _factor_rows(
                 total -= dense_row[indices[b]] * out[b]
             out[p] = total / out[diagonal[k]]
             dense_row[k] = out[p]
+            # rows i come in increasing order: row k's upper entries fill in column order
+            out[upper_fill[k]] = out[p]
+            upper_fill[k] += 1
         pivot = matrix.data[diagonal[i]] * (1.0 + shift)
         for p in range(start, diagonal[i]):
             pivot -= out[p] * out[p]
@@ -578,7 +605,7 @@ def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
     """IC(0): ``L L^T ~ A + shift diag(A)`` with L on the lower pattern of A, Eq. (F11).
 
     ``out`` has A's layout (``matrix.data``'s shape); its lower-triangle entries, diagonal
-    included, receive L (upper entries are left untouched). Row by row:
+    included, receive L, its upper entries L^T. Row by row:
     ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
     ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
 
@@ -588,50 +615,94 @@ def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
     """
     n = matrix.indptr.shape[0] - 1
     bounds = np.array([0, matrix.blocks[0], matrix.blocks[1]], dtype=np.int64)
+    upper_fill = matrix.diagonal + 1
     ok = np.ones(2, dtype=np.bool_)
     for block in prange(2):
         dense_row = np.zeros(n)
-        ok[block] = _factor_rows(matrix, shift, bounds[block], bounds[block + 1], dense_row, out)
+        ok[block] = _factor_rows(
+            matrix, shift, bounds[block], bounds[block + 1], dense_row, upper_fill, out
+        )
     if not (ok[0] and ok[1]):
         return False
-    return _factor_rows(matrix, shift, matrix.blocks[1], n, np.zeros(n), out)
-
-
-@njit(cache=True)
-def _forward(
-    matrix: Matrix, factor: np.ndarray, r: np.ndarray, z: np.ndarray, first: int, last: int
-) -> None:
-    """Forward substitution ``L z = r`` on rows ``[first, last)``."""
-    for i in range(first, last):
-        total = r[i]
-        for p in range(matrix.indptr[i], matrix.diagonal[i]):
-            total -= factor[p] * z[matrix.indices[p]]
-        z[i] = total / factor[matrix.diagonal[i]]
-
-
-@njit(cache=True)
-def _backward(matrix: Matrix, factor: np.ndarray, z: np.ndarray, first: int, last: int) -> None:
-    """Backward substitution ``L^T z = z`` by columns, rows ``last - 1`` down to ``first``."""
-    for i in range(last - 1, first - 1, -1):
-        z[i] /= factor[matrix.diagonal[i]]
-        for p in range(matrix.indptr[i], matrix.diagonal[i]):
-            z[matrix.indices[p]] -= factor[p] * z[i]
+    return _factor_rows(matrix, shift, matrix.blocks[1], n, np.zeros(n), upper_fill, out)
 
 
 @njit(cache=True, parallel=True)
-def _precondition(matrix: Matrix, factor: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
+def compact_factor(matrix: Matrix, factor: np.ndarray) -> Factor:
+    """The :class:`Factor` of an IC(0) factor in A's layout (from :func:`incomplete_cholesky`)."""
+    n = matrix.indptr.shape[0] - 1
+    lower_start = np.zeros(n + 1, dtype=np.int64)
+    upper_start = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        lower_start[i + 1] = lower_start[i] + matrix.diagonal[i] - matrix.indptr[i]
+    for t in range(n):  # row i = n - 1 - t
+        upper_start[t + 1] = upper_start[t] + matrix.indptr[n - t] - matrix.diagonal[n - 1 - t] - 1
+    lower_indices = np.empty(lower_start[n], dtype=np.int32)
+    lower_data = np.empty(lower_start[n], dtype=np.float32)
+    upper_indices = np.empty(upper_start[n], dtype=np.int32)
+    upper_data = np.empty(upper_start[n], dtype=np.float32)
+    inverse_diagonal = np.empty(n)
+    for i in prange(n):
+        q = lower_start[i]
+        for p in range(matrix.indptr[i], matrix.diagonal[i]):
+            lower_indices[q] = matrix.indices[p]
+            lower_data[q] = factor[p]
+            q += 1
+        q = upper_start[n - 1 - i]
+        for p in range(matrix.diagonal[i] + 1, matrix.indptr[i + 1]):
+            upper_indices[q] = matrix.indices[p]
+            upper_data[q] = factor[p]
+            q += 1
+        inverse_diagonal[i] = 1.0 / factor[matrix.diagonal[i]]
+    return Factor(
+        lower_start, lower_indices, lower_data, upper_start, upper_indices, upper_data,
+        inverse_diagonal,
+    )  # fmt: skip
+
+
+def no_factor() -> Factor:
+    """An empty :class:`Factor`, for plain CG."""
+    start = np.zeros(1, dtype=np.int64)
+    indices = np.empty(0, dtype=np.int32)
+    data = np.empty(0, dtype=np.float32)
+    return Factor(start, indices, data, start, indices, data, np.empty(0))
+
+
+@njit(cache=True)
+def _forward(factor: Factor, r: np.ndarray, z: np.ndarray, first: int, last: int) -> None:
+    """Forward substitution ``L z = r`` on rows ``[first, last)``."""
+    for i in range(first, last):
+        total = 0.0
+        for p in range(factor.lower_start[i], factor.lower_start[i + 1]):
+            total += factor.lower_data[p] * z[factor.lower_indices[p]]
+        z[i] = (r[i] - total) * factor.inverse_diagonal[i]
+
+
+@njit(cache=True)
+def _backward(factor: Factor, z: np.ndarray, first: int, last: int) -> None:
+    """Backward substitution ``L^T z = z`` on rows ``last - 1`` down to ``first``."""
+    n = z.shape[0]
+    for t in range(n - last, n - first):
+        i = n - 1 - t
+        total = 0.0
+        for p in range(factor.upper_start[t], factor.upper_start[t + 1]):
+            total += factor.upper_data[p] * z[factor.upper_indices[p]]
+        z[i] = (z[i] - total) * factor.inverse_diagonal[i]
+
+
+@njit(cache=True, parallel=True)
+def _precondition(blocks: np.ndarray, factor: Factor, r: np.ndarray, z: np.ndarray) -> None:
     """``z = (L L^T)^-1 r``: forward substitution on L's rows, then backward substitution on
-    L^T by columns (row i of L is column i of L^T), so no transpose is stored. The two blocks
-    of ``matrix.blocks`` in parallel: forward blocks then separator, backward separator (which
-    updates both blocks) then blocks."""
+    L^T's rows. The two blocks of ``blocks`` (:class:`Matrix`) in parallel: forward blocks
+    then separator, backward separator then blocks."""
     n = r.shape[0]
-    bounds = np.array([0, matrix.blocks[0], matrix.blocks[1]], dtype=np.int64)
+    bounds = np.array([0, blocks[0], blocks[1]], dtype=np.int64)
     for block in prange(2):
-        _forward(matrix, factor, r, z, bounds[block], bounds[block + 1])
-    _forward(matrix, factor, r, z, matrix.blocks[1], n)
-    _backward(matrix, factor, z, matrix.blocks[1], n)
+        _forward(factor, r, z, bounds[block], bounds[block + 1])
+    _forward(factor, r, z, blocks[1], n)
+    _backward(factor, z, blocks[1], n)
     for block in prange(2):
-        _backward(matrix, factor, z, bounds[block], bounds[block + 1])
+        _backward(factor, z, bounds[block], bounds[block + 1])
 
 
 @njit(cache=True)
@@ -645,7 +716,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
 @njit(cache=True)
 def conjugate_gradient(
     matrix: Matrix,
-    factor: np.ndarray,
+    factor: Factor,
     preconditioned: bool,
     b: np.ndarray,
     x: np.ndarray,
@@ -655,8 +726,8 @@ def conjugate_gradient(
     """(Preconditioned) conjugate gradients for ``A x = b``, Eq. (F12), from the initial guess
     in ``x`` (overwritten by the solution). Stops when ``|b - A x| <= tolerance |b|``.
 
-    With ``preconditioned`` the IC(0) factor in ``factor`` (from :func:`incomplete_cholesky`)
-    preconditions; otherwise plain CG. Returns (iterations, relative residual).
+    With ``preconditioned`` the IC(0) factor ``factor`` (:func:`compact_factor`) preconditions;
+    otherwise plain CG (``factor`` unused). Returns (iterations, relative residual).
     """
     n = b.shape[0]
     norm_b = math.sqrt(_dot(b, b))
@@ -671,7 +742,7 @@ def conjugate_gradient(
         r[i] = b[i] - r[i]
     z = np.empty(n)
     if preconditioned:
-        _precondition(matrix, factor, r, z)
+        _precondition(matrix.blocks, factor, r, z)
     else:
         z[:] = r
     d = z.copy()
@@ -693,7 +764,7 @@ def conjugate_gradient(
         if not math.isfinite(residual):
             break
         if preconditioned:
-            _precondition(matrix, factor, r, z)
+            _precondition(matrix.blocks, factor, r, z)
         else:
             z[:] = r
         rz_new = _dot(r, z)

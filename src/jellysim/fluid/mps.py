@@ -486,9 +486,10 @@ def solve(
     IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a pivot is
     not positive. Returns (iterations, relative residual, shift used).
     """
-    factor = np.zeros_like(matrix.data)
     shift = 0.0
+    compact = kernels.no_factor()
     if method == "iccg":
+        factor = np.zeros_like(matrix.data)
         for shift in (0.0, *IC_SHIFTS):
             if kernels.incomplete_cholesky(matrix, shift, factor):
                 break
@@ -499,8 +500,9 @@ def solve(
                 iterations=0,
                 residual=math.inf,
             )
+        compact = kernels.compact_factor(matrix, factor)
     iterations, residual = kernels.conjugate_gradient(
-        matrix, factor, method == "iccg", rhs, solution, tolerance, max_iterations
+        matrix, compact, method == "iccg", rhs, solution, tolerance, max_iterations
     )
     return iterations, residual, shift
 
