@@ -69,17 +69,19 @@ class Matrix(NamedTuple):
 class Factor(NamedTuple):
     """The IC(0) factor L as the triangular solves read it: the strict lower triangle of L by
     rows, that of L^T (the strict upper triangle) by rows from the last to the first, so that
-    both substitutions stream through memory forwards, and 1 / L_ii. Off-diagonal entries are
-    stored in single precision with 32-bit column indices: the solves are bound by memory
-    bandwidth, and rounding L to 7 digits changes a preconditioner that only approximates A
-    anyway (the solve's accuracy is set by the double-precision CG residual)."""
+    both substitutions stream through memory forwards and gather (no scatter), with 32-bit
+    column indices (the solves are bound by memory bandwidth), and 1 / L_ii.
+
+    Entries stay in double precision: with a single-precision copy the solves still converge
+    to the same residual, but the coarse dam break of tests/integration/test_fluid_run.py
+    took another round-off path that blew up at t = 0.05 s (docs/performance.md)."""
 
     lower_start: np.ndarray  # (n + 1,) int64
     lower_indices: np.ndarray  # (nnz_lower,) int32
-    lower_data: np.ndarray  # (nnz_lower,) float32
+    lower_data: np.ndarray  # (nnz_lower,) float64
     upper_start: np.ndarray  # (n + 1,) int64, row n - 1 - t at t
     upper_indices: np.ndarray  # (nnz_lower,) int32
-    upper_data: np.ndarray  # (nnz_lower,) float32
+    upper_data: np.ndarray  # (nnz_lower,) float64
     inverse_diagonal: np.ndarray  # (n,) float64
 
 
@@ -117,6 +119,44 @@ def _cell_offsets(dim: int, reach: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _count_cells(
+    i: int,
+    position: np.ndarray,
+    coords: np.ndarray,
+    shape: np.ndarray,
+    stride: np.ndarray,
+    offsets: np.ndarray,
+    counts: np.ndarray,
+    member_position: np.ndarray,
+    radius2: float,
+) -> int:
+    """How many neighbours :func:`_scan_cells` finds for particle i, without branches in the
+    loop over candidates (i itself is among them, at distance 0, and is taken off)."""
+    dim = position.shape[1]
+    found = -1
+    x = coords[i, 0]
+    first_x = max(x - CELLS_PER_RADIUS, 0)
+    last_x = min(x + CELLS_PER_RADIUS, shape[0] - 1)
+    for o in range(offsets.shape[0]):
+        c = 0
+        inside = True
+        for k in range(1, dim):
+            q = coords[i, k] + offsets[o, k - 1]
+            if q < 0 or q >= shape[k]:
+                inside = False
+            c += q * stride[k]
+        if not inside:
+            continue
+        for m in range(counts[c + first_x], counts[c + last_x + 1]):
+            r2 = 0.0
+            for k in range(dim):
+                d = member_position[m, k] - position[i, k]
+                r2 += d * d
+            found += r2 < radius2
+    return found
+
+
+@njit(cache=True)
 def _scan_cells(
     i: int,
     position: np.ndarray,
@@ -133,8 +173,8 @@ def _scan_cells(
     slot: int,
 ) -> int:
     """Particle i's neighbours closer than sqrt(radius2) in the cells around its own, in
-    cell order then member order; written from ``slot`` on into ``index`` and ``distance`` unless
-    ``slot`` is negative (count only). Returns how many there are.
+    cell order then member order; written from ``slot`` on into ``index`` and ``distance``.
+    Returns how many there are.
 
     Cells are numbered with axis 0 fastest, so the cells along axis 0 of each of the offsets
     across the other axes are one run of ``members`` (and of ``member_position``, the members'
@@ -163,9 +203,8 @@ def _scan_cells(
                 j = members[m]
                 if j == i:
                     continue
-                if slot >= 0:
-                    index[slot + found] = j
-                    distance[slot + found] = math.sqrt(r2)
+                index[slot + found] = j
+                distance[slot + found] = math.sqrt(r2)
                 found += 1
     return found
 
@@ -230,14 +269,11 @@ def neighbour_list(
     radius2 = radius * radius
 
     row_count = np.zeros(n + 1, dtype=np.int64)
-    no_index = np.empty(0, dtype=np.int64)
-    no_distance = np.empty(0)
     for i in prange(n):  # first pass: count each row
         if cell_of[i] >= 0 and rows[i]:
-            row_count[i + 1] = _scan_cells(
-                i, position, coords, shape, stride, offsets, counts, members, member_position,
-                radius2, no_index, no_distance, -1,
-            )  # fmt: skip
+            row_count[i + 1] = _count_cells(
+                i, position, coords, shape, stride, offsets, counts, member_position, radius2
+            )
     for i in range(n):
         row_count[i + 1] += row_count[i]
     index = np.empty(row_count[n], dtype=np.int64)
@@ -638,9 +674,9 @@ def compact_factor(matrix: Matrix, factor: np.ndarray) -> Factor:
     for t in range(n):  # row i = n - 1 - t
         upper_start[t + 1] = upper_start[t] + matrix.indptr[n - t] - matrix.diagonal[n - 1 - t] - 1
     lower_indices = np.empty(lower_start[n], dtype=np.int32)
-    lower_data = np.empty(lower_start[n], dtype=np.float32)
+    lower_data = np.empty(lower_start[n])
     upper_indices = np.empty(upper_start[n], dtype=np.int32)
-    upper_data = np.empty(upper_start[n], dtype=np.float32)
+    upper_data = np.empty(upper_start[n])
     inverse_diagonal = np.empty(n)
     for i in prange(n):
         q = lower_start[i]
@@ -664,7 +700,7 @@ def no_factor() -> Factor:
     """An empty :class:`Factor`, for plain CG."""
     start = np.zeros(1, dtype=np.int64)
     indices = np.empty(0, dtype=np.int32)
-    data = np.empty(0, dtype=np.float32)
+    data = np.empty(0)
     return Factor(start, indices, data, start, indices, data, np.empty(0))
 
 
