@@ -26,7 +26,13 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 @pytest.fixture(scope="module")
 def dam(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("dam")
-    done = _cli("run", "dam-break-2d", "--out", str(out), "--quiet", "--set", "fluid.spacing=0.005")
+    # Tolerance 1e-10, not the default 1e-8: at 20 particles across, the front error at 1e-8
+    # depends on round-off (0.12, 0.14 and 0.28 for three orderings of the same sums), at
+    # 1e-10 it does not (0.103 and 0.106), so the test checks the physics, not the noise.
+    done = _cli(
+        "run", "dam-break-2d", "--out", str(out), "--quiet",
+        "--set", "fluid.spacing=0.005", "--set", "fluid.tolerance=1e-10",
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     return out
 

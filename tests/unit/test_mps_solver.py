@@ -9,7 +9,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from jellysim.errors import SimulationUnstable
-from jellysim.fluid import kernels
+from jellysim.fluid import kernels, mps
 from jellysim.fluid.geometry import FLUID, tank, water_block
 from jellysim.fluid.mps import FluidDiverged, MPSParameters, MPSSolver, solve
 
@@ -75,12 +75,47 @@ def test_iccg_needs_three_times_fewer_iterations_than_cg(system) -> None:
     assert counts["iccg"] * 3 <= counts["cg"]
 
 
+def test_two_block_ordering_uncouples_the_blocks_and_solves_the_same_system(monkeypatch) -> None:
+    """With the two-block order (kernels.number_unknowns) no entry joins block 0 and block 1,
+    the separator is a thin slab, and ICCG gives the one-block solution to its tolerance in
+    about as many iterations."""
+    solver = dam_break()
+    dt = 5e-4
+    for _ in range(20):
+        solver.step(dt)
+    one = solver.poisson_system(dt)
+    monkeypatch.setattr(mps, "TWO_BLOCK_ROWS", 0)
+    two = solver.poisson_system(dt)
+    b0, b1 = two.matrix.blocks
+    n = two.rhs.size
+    assert 0 < b0 < b1 < n and n - b1 < 0.25 * n
+    assert np.array_equal(np.sort(two.particles), one.particles)
+    a = to_scipy(two.matrix)
+    assert a[:b0, b0:b1].nnz == 0 and a[b0:b1, :b0].nnz == 0
+    # the same matrix, rows and columns permuted
+    order = np.searchsorted(one.particles, two.particles)
+    assert abs(to_scipy(one.matrix)[order][:, order] - a).max() == 0.0
+    np.testing.assert_array_equal(two.rhs, one.rhs[order])
+    counts = []
+    solutions = []
+    for system in (one, two):
+        x = np.zeros(system.rhs.size)
+        iterations, residual, _ = solve(system.matrix, system.rhs, x, "iccg", 1e-10, 5000)
+        assert residual <= 1e-10
+        counts.append(iterations)
+        solutions.append(x)
+    assert counts[1] <= counts[0] * 1.15
+    np.testing.assert_allclose(
+        solutions[1], solutions[0][order], rtol=0, atol=1e-7 * np.abs(solutions[0]).max()
+    )
+
+
 def test_ic0_breakdown_is_shifted() -> None:
     """An indefinite matrix makes IC(0) fail unshifted; a diagonal shift is applied and named."""
     indptr = np.array([0, 2, 4])
     indices = np.array([0, 1, 0, 1])
     data = np.array([1.0, 1.05, 1.05, 1.0])
-    matrix = kernels.Matrix(indptr, indices, data, np.array([0, 3]))
+    matrix = kernels.Matrix(indptr, indices, data, np.array([0, 3]), np.array([2, 2]))
     factor = np.zeros(4)
     assert not kernels.incomplete_cholesky(matrix, 0.0, factor)
     assert kernels.incomplete_cholesky(matrix, 0.1, factor)
@@ -110,7 +145,10 @@ def test_restore_resumes_bitwise() -> None:
         assert np.array_equal(value, resumed.state_arrays()[name]), name
 
 
-def test_result_does_not_depend_on_thread_count() -> None:
+@pytest.mark.parametrize("two_blocks", [False, True])
+def test_result_does_not_depend_on_thread_count(two_blocks: bool, monkeypatch) -> None:
+    if two_blocks:  # the PPE of this small dam break in two blocks and a separator
+        monkeypatch.setattr(mps, "TWO_BLOCK_ROWS", 0)
     results = []
     default = numba.get_num_threads()
     try:

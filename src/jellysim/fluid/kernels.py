@@ -54,12 +54,35 @@ class Neighbours(NamedTuple):
 
 class Matrix(NamedTuple):
     """Square sparse matrix in CSR with sorted column indices; ``diagonal[i]`` is the position
-    of entry (i, i) in ``data``."""
+    of entry (i, i) in ``data``. ``blocks`` = (b0, b1): rows ``[0, b0)`` and ``[b0, b1)`` are
+    two uncoupled blocks (no entry joins them), rows from b1 on the separator coupled to both;
+    the IC(0) factor and its triangular solves treat the two blocks in parallel. (n, n): one
+    block."""
 
     indptr: np.ndarray  # (n + 1,) int64
     indices: np.ndarray  # (nnz,) int64
     data: np.ndarray  # (nnz,) float64
     diagonal: np.ndarray  # (n,) int64
+    blocks: np.ndarray  # (2,) int64
+
+
+class Factor(NamedTuple):
+    """The IC(0) factor L as the triangular solves read it: the strict lower triangle of L by
+    rows, that of L^T (the strict upper triangle) by rows from the last to the first, so that
+    both substitutions stream through memory forwards and gather (no scatter), with 32-bit
+    column indices (the solves are bound by memory bandwidth), and 1 / L_ii.
+
+    Entries stay in double precision: with a single-precision copy the solves still converge
+    to the same residual, but the coarse dam break of tests/integration/test_fluid_run.py
+    took another round-off path that blew up at t = 0.05 s (docs/performance.md)."""
+
+    lower_start: np.ndarray  # (n + 1,) int64
+    lower_indices: np.ndarray  # (nnz_lower,) int32
+    lower_data: np.ndarray  # (nnz_lower,) float64
+    upper_start: np.ndarray  # (n + 1,) int64, row n - 1 - t at t
+    upper_indices: np.ndarray  # (nnz_lower,) int32
+    upper_data: np.ndarray  # (nnz_lower,) float64
+    inverse_diagonal: np.ndarray  # (n,) float64
 
 
 @njit(cache=True)
@@ -73,17 +96,64 @@ def weight(r: float, re: float) -> float:
 # ---------------------------------------------------------------------------- neighbour search
 
 
+# Cells of side radius / CELLS_PER_RADIUS: particle i scans the (2 CELLS_PER_RADIUS + 1)^D cells
+# around its own, a volume of (2 + 1 / CELLS_PER_RADIUS)^D radius^D (27 radius^3 with cells of
+# side radius, 15.6 with half that).
+CELLS_PER_RADIUS = 2
+
+
 @njit(cache=True)
-def _cell_offsets(dim: int) -> np.ndarray:
-    """The 3^D offsets of a cell's neighbourhood, (3^D, D) int64, in a fixed order."""
-    count = 3**dim
-    out = np.empty((count, dim), dtype=np.int64)
+def _cell_offsets(dim: int, reach: int) -> np.ndarray:
+    """The (2 reach + 1)^(D-1) offsets of a cell's neighbourhood across axes 1..D-1,
+    ((2 reach + 1)^(D-1), D - 1) int64, in a fixed order (axis 0 is scanned as one run of
+    2 reach + 1 cells, contiguous in the sort)."""
+    side = 2 * reach + 1
+    count = side ** (dim - 1)
+    out = np.empty((count, dim - 1), dtype=np.int64)
     for c in range(count):
         rest = c
-        for k in range(dim):
-            out[c, k] = rest % 3 - 1
-            rest //= 3
+        for k in range(dim - 1):
+            out[c, k] = rest % side - reach
+            rest //= side
     return out
+
+
+@njit(cache=True)
+def _count_cells(
+    i: int,
+    position: np.ndarray,
+    coords: np.ndarray,
+    shape: np.ndarray,
+    stride: np.ndarray,
+    offsets: np.ndarray,
+    counts: np.ndarray,
+    member_position: np.ndarray,
+    radius2: float,
+) -> int:
+    """How many neighbours :func:`_scan_cells` finds for particle i, without branches in the
+    loop over candidates (i itself is among them, at distance 0, and is taken off)."""
+    dim = position.shape[1]
+    found = -1
+    x = coords[i, 0]
+    first_x = max(x - CELLS_PER_RADIUS, 0)
+    last_x = min(x + CELLS_PER_RADIUS, shape[0] - 1)
+    for o in range(offsets.shape[0]):
+        c = 0
+        inside = True
+        for k in range(1, dim):
+            q = coords[i, k] + offsets[o, k - 1]
+            if q < 0 or q >= shape[k]:
+                inside = False
+            c += q * stride[k]
+        if not inside:
+            continue
+        for m in range(counts[c + first_x], counts[c + last_x + 1]):
+            r2 = 0.0
+            for k in range(dim):
+                d = member_position[m, k] - position[i, k]
+                r2 += d * d
+            found += r2 < radius2
+    return found
 
 
 @njit(cache=True)
@@ -96,53 +166,63 @@ def _scan_cells(
     offsets: np.ndarray,
     counts: np.ndarray,
     members: np.ndarray,
+    member_position: np.ndarray,
     radius2: float,
     index: np.ndarray,
     distance: np.ndarray,
     slot: int,
 ) -> int:
-    """Particle i's neighbours closer than sqrt(radius2) in the 3^D cells around its own, in
-    cell order then member order; written from ``slot`` on into ``index`` and ``distance`` unless
-    ``slot`` is negative (count only). Returns how many there are."""
+    """Particle i's neighbours closer than sqrt(radius2) in the cells around its own, in
+    cell order then member order; written from ``slot`` on into ``index`` and ``distance``.
+    Returns how many there are.
+
+    Cells are numbered with axis 0 fastest, so the cells along axis 0 of each of the offsets
+    across the other axes are one run of ``members`` (and of ``member_position``, the members'
+    positions in that order)."""
     dim = position.shape[1]
     found = 0
+    x = coords[i, 0]
+    first_x = max(x - CELLS_PER_RADIUS, 0)
+    last_x = min(x + CELLS_PER_RADIUS, shape[0] - 1)
     for o in range(offsets.shape[0]):
         c = 0
         inside = True
-        for k in range(dim):
-            q = coords[i, k] + offsets[o, k]
+        for k in range(1, dim):
+            q = coords[i, k] + offsets[o, k - 1]
             if q < 0 or q >= shape[k]:
                 inside = False
             c += q * stride[k]
         if not inside:
             continue
-        for m in range(counts[c], counts[c + 1]):
-            j = members[m]
-            if j == i:
-                continue
+        for m in range(counts[c + first_x], counts[c + last_x + 1]):
             r2 = 0.0
             for k in range(dim):
-                d = position[j, k] - position[i, k]
+                d = member_position[m, k] - position[i, k]
                 r2 += d * d
             if r2 < radius2:
-                if slot >= 0:
-                    index[slot + found] = j
-                    distance[slot + found] = math.sqrt(r2)
+                j = members[m]
+                if j == i:
+                    continue
+                index[slot + found] = j
+                distance[slot + found] = math.sqrt(r2)
                 found += 1
     return found
 
 
 @njit(cache=True, parallel=True)
 def neighbour_list(
-    position: np.ndarray, alive: np.ndarray, radius: float
+    position: np.ndarray, alive: np.ndarray, rows: np.ndarray, radius: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cell-list search: all pairs of live particles closer than ``radius`` (m).
+    """Cell-list search: for every live particle i with ``rows[i]`` ((N,) bool), all live
+    particles closer than ``radius`` (m); other rows are empty (such particles still appear as
+    neighbours of others).
 
-    Cells of side ``radius`` over the live particles' bounding box, filled by a stable counting
-    sort; particle i scans the 3^D cells around its own. Returns the arrays of
-    :class:`Neighbours` ``(start, indices, distance)``; within a row the order is fixed (cell order,
-    then particle index). The arrays are allocated here because their sizes depend on the
-    configuration.
+    Cells of side ``radius / CELLS_PER_RADIUS`` over the live particles' bounding box, filled by
+    a stable counting sort that also copies the members' positions in cell order; particle i
+    scans the cells within ``CELLS_PER_RADIUS`` of its own along each axis.
+    Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
+    within a row the order is fixed (cell order, then particle index). The arrays are allocated
+    here because their sizes depend on the configuration.
     """
     n, dim = position.shape
     lower = np.full(dim, np.inf)
@@ -152,7 +232,7 @@ def neighbour_list(
             for k in range(dim):
                 lower[k] = min(lower[k], position[i, k])
                 upper[k] = max(upper[k], position[i, k])
-    inverse = 1.0 / radius
+    inverse = CELLS_PER_RADIUS / radius
     shape = np.ones(dim, dtype=np.int64)
     for k in range(dim):
         if upper[k] >= lower[k]:
@@ -177,31 +257,32 @@ def neighbour_list(
         counts[c + 1] += counts[c]
     fill = counts[:-1].copy()
     members = np.empty(counts[n_cells], dtype=np.int64)
+    member_position = np.empty((counts[n_cells], dim))
     for i in range(n):
         if cell_of[i] >= 0:
-            members[fill[cell_of[i]]] = i
+            m = fill[cell_of[i]]
+            members[m] = i
+            for k in range(dim):
+                member_position[m, k] = position[i, k]
             fill[cell_of[i]] += 1
-    offsets = _cell_offsets(dim)
+    offsets = _cell_offsets(dim, CELLS_PER_RADIUS)
     radius2 = radius * radius
 
     row_count = np.zeros(n + 1, dtype=np.int64)
-    no_index = np.empty(0, dtype=np.int64)
-    no_distance = np.empty(0)
     for i in prange(n):  # first pass: count each row
-        if cell_of[i] >= 0:
-            row_count[i + 1] = _scan_cells(
-                i, position, coords, shape, stride, offsets, counts, members, radius2,
-                no_index, no_distance, -1,
-            )  # fmt: skip
+        if cell_of[i] >= 0 and rows[i]:
+            row_count[i + 1] = _count_cells(
+                i, position, coords, shape, stride, offsets, counts, member_position, radius2
+            )
     for i in range(n):
         row_count[i + 1] += row_count[i]
     index = np.empty(row_count[n], dtype=np.int64)
     distance = np.empty(row_count[n])
     for i in prange(n):  # second pass: fill each row
-        if cell_of[i] >= 0:
+        if cell_of[i] >= 0 and rows[i]:
             _scan_cells(
-                i, position, coords, shape, stride, offsets, counts, members, radius2,
-                index, distance, row_count[i],
+                i, position, coords, shape, stride, offsets, counts, members, member_position,
+                radius2, index, distance, row_count[i],
             )  # fmt: skip
     return row_count, index, distance
 
@@ -214,7 +295,8 @@ def number_density(
     neighbours: Neighbours, alive: np.ndarray, re: float, out: np.ndarray, count: np.ndarray
 ) -> None:
     """Particle number density, Eq. (F2): ``n_i = sum_j w(|r_j - r_i|, r_e)`` over live particles
-    of every kind (dummies included) into ``out``; ``count`` receives the number of neighbours
+    of every kind (dummies included) into ``out`` (0 for particles without a neighbour-list row);
+    ``count`` receives the number of neighbours
     closer than r_e (for neighbour-count surface detection)."""
     for i in prange(alive.shape[0]):
         total = 0.0
@@ -363,16 +445,70 @@ def velocity_divergence(
 
 
 @njit(cache=True)
-def number_unknowns(unknown: np.ndarray, out: np.ndarray) -> int:
-    """Row number of each unknown particle (-1 for the others) into ``out``; returns the count."""
+def number_unknowns(
+    unknown: np.ndarray, position: np.ndarray, width: float, min_rows: int, out: np.ndarray
+) -> np.ndarray:
+    """Row number of each unknown particle (-1 for the others) into ``out``, in the order of
+    :class:`Matrix`'s ``blocks``; returns (b0, b1, n) (int64).
+
+    With fewer than ``min_rows`` unknowns, one block in particle order. Otherwise the unknowns
+    are cut at the median of their coordinate along their longest extent: block 0 below
+    ``median - width / 2``, block 1 from ``median + width / 2`` on, the separator between; each
+    numbered in particle order. With ``width`` the coupling radius (m), no pair of block 0 and
+    block 1 lies closer than it.
+    """
+    n, dim = position.shape
     count = 0
-    for i in range(unknown.shape[0]):
+    for i in range(n):
         if unknown[i]:
-            out[i] = count
             count += 1
+    parts = np.array([count, count, count], dtype=np.int64)
+    if count < max(min_rows, 1):
+        row = 0
+        for i in range(n):
+            if unknown[i]:
+                out[i] = row
+                row += 1
+            else:
+                out[i] = -1
+        return parts
+    lower = np.full(dim, np.inf)
+    upper = np.full(dim, -np.inf)
+    for i in range(n):
+        if unknown[i]:
+            for k in range(dim):
+                lower[k] = min(lower[k], position[i, k])
+                upper[k] = max(upper[k], position[i, k])
+    axis = np.argmax(upper - lower)
+    coordinate = np.empty(count)
+    row = 0
+    for i in range(n):
+        if unknown[i]:
+            coordinate[row] = position[i, axis]
+            row += 1
+    middle = np.median(coordinate)
+    block = np.full(n, -1, dtype=np.int64)
+    size = np.zeros(3, dtype=np.int64)
+    for i in range(n):
+        if unknown[i]:
+            x = position[i, axis]
+            if x < middle - 0.5 * width:
+                block[i] = 0
+            elif x >= middle + 0.5 * width:
+                block[i] = 1
+            else:
+                block[i] = 2
+            size[block[i]] += 1
+    fill = np.array([0, size[0], size[0] + size[1]], dtype=np.int64)
+    for i in range(n):
+        if block[i] >= 0:
+            out[i] = fill[block[i]]
+            fill[block[i]] += 1
         else:
             out[i] = -1
-    return count
+    parts[0] = size[0]
+    parts[1] = size[0] + size[1]
+    return parts
 
 
 @njit(cache=True, parallel=True)
@@ -412,14 +548,14 @@ def assemble_poisson(
         indptr[row + 1] = found
     for row in range(n_rows):
         indptr[row + 1] += indptr[row]
-    indices = np.empty(indptr[n_rows], dtype=np.int64)
-    data = np.empty(indptr[n_rows])
-    diagonal = np.empty(n_rows, dtype=np.int64)
+    # Rows in neighbour order, the diagonal first
+    unsorted_indices = np.empty(indptr[n_rows], dtype=np.int64)
+    unsorted_data = np.empty(indptr[n_rows])
     for row in prange(n_rows):
         i = particle_of[row]
         start = indptr[row]
         end = start + 1
-        indices[start] = row
+        unsorted_indices[start] = row
         total = 0.0
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             r = neighbours.distance[m]
@@ -429,24 +565,26 @@ def assemble_poisson(
             a = coefficient * weight(r, re)
             total += a
             if row_of[j] >= 0:
-                indices[end] = row_of[j]
-                data[end] = -a
+                unsorted_indices[end] = row_of[j]
+                unsorted_data[end] = -a
                 end += 1
-        data[start] = total + diagonal_shift
-        # Insertion sort of the row by column (rows are short).
-        for p in range(start + 1, end):
-            column = indices[p]
-            value = data[p]
-            q = p - 1
-            while q >= start and indices[q] > column:
-                indices[q + 1] = indices[q]
-                data[q + 1] = data[q]
-                q -= 1
-            indices[q + 1] = column
-            data[q + 1] = value
-        for p in range(start, end):
-            if indices[p] == row:
-                diagonal[row] = p
+        unsorted_data[start] = total + diagonal_shift
+    # Sorted columns by transposition: A is symmetric to the last bit (r_ij and r_ji are the
+    # same floating-point numbers), and sweeping the rows in order appends to each transposed
+    # row its columns in increasing order.
+    indices = np.empty(indptr[n_rows], dtype=np.int64)
+    data = np.empty(indptr[n_rows])
+    diagonal = np.empty(n_rows, dtype=np.int64)
+    fill = indptr[:-1].copy()
+    for row in range(n_rows):
+        for p in range(indptr[row], indptr[row + 1]):
+            column = unsorted_indices[p]
+            q = fill[column]
+            fill[column] += 1
+            indices[q] = row
+            data[q] = unsorted_data[p]
+            if column == row:
+                diagonal[row] = q
     return indptr, indices, data, diagonal
 
 
@@ -461,63 +599,146 @@ def multiply(matrix: Matrix, x: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
-    """IC(0): ``L L^T ~ A + shift diag(A)`` with L on the lower pattern of A, Eq. (F11).
-
-    ``out`` has A's layout (``matrix.data``'s shape); its lower-triangle entries, diagonal
-    included, receive L (upper entries are left untouched). Row by row:
-    ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
-    ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
-    """
+def _factor_rows(
+    matrix: Matrix,
+    shift: float,
+    first: int,
+    last: int,
+    dense_row: np.ndarray,
+    upper_fill: np.ndarray,
+    out: np.ndarray,
+) -> bool:
+    """IC(0) rows ``[first, last)`` of :func:`incomplete_cholesky`, given the rows they refer
+    to; ``dense_row`` (n,) zeros, left zero; ``upper_fill`` (n,) the next free upper entry of
+    each row, where L_ik is copied as (L^T)_ki."""
     indptr = matrix.indptr
     indices = matrix.indices
     diagonal = matrix.diagonal
-    for i in range(indptr.shape[0] - 1):
+    for i in range(first, last):
         start = indptr[i]
         for p in range(start, diagonal[i]):
             k = indices[p]
             total = matrix.data[p]
-            # merge the lower parts of rows i (before column k) and k (before its diagonal)
-            a = start
-            b = indptr[k]
-            while a < p and b < diagonal[k]:
-                ca = indices[a]
-                cb = indices[b]
-                if ca == cb:
-                    total -= out[a] * out[b]
-                    a += 1
-                    b += 1
-                elif ca < cb:
-                    a += 1
-                else:
-                    b += 1
+            for b in range(indptr[k], diagonal[k]):
+                total -= dense_row[indices[b]] * out[b]
             out[p] = total / out[diagonal[k]]
+            dense_row[k] = out[p]
+            # rows i come in increasing order: row k's upper entries fill in column order
+            out[upper_fill[k]] = out[p]
+            upper_fill[k] += 1
         pivot = matrix.data[diagonal[i]] * (1.0 + shift)
         for p in range(start, diagonal[i]):
             pivot -= out[p] * out[p]
+            dense_row[indices[p]] = 0.0
         if not pivot > 0.0:
             return False
         out[diagonal[i]] = math.sqrt(pivot)
     return True
 
 
-@njit(cache=True)
-def _precondition(matrix: Matrix, factor: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
-    """``z = (L L^T)^-1 r``: forward substitution on L's rows, then backward substitution on
-    L^T by columns (row i of L is column i of L^T), so no transpose is stored."""
-    indptr = matrix.indptr
-    indices = matrix.indices
-    diagonal = matrix.diagonal
-    n = r.shape[0]
+@njit(cache=True, parallel=True)
+def incomplete_cholesky(matrix: Matrix, shift: float, out: np.ndarray) -> bool:
+    """IC(0): ``L L^T ~ A + shift diag(A)`` with L on the lower pattern of A, Eq. (F11).
+
+    ``out`` has A's layout (``matrix.data``'s shape); its lower-triangle entries, diagonal
+    included, receive L, its upper entries L^T. Row by row:
+    ``L_ik = (A_ik - sum_{m<k} L_im L_km) / L_kk`` over the common pattern,
+    ``L_ii = sqrt(A_ii (1 + shift) - sum_{m<i} L_im^2)``. Returns False on a non-positive pivot.
+
+    Row i's finished entries are scattered into a dense row (zero off the pattern), so the sum
+    over m runs over row k's pattern alone, in column order, without merging the two rows. The
+    two blocks of ``matrix.blocks`` are factored in parallel, then the separator.
+    """
+    n = matrix.indptr.shape[0] - 1
+    bounds = np.array([0, matrix.blocks[0], matrix.blocks[1]], dtype=np.int64)
+    upper_fill = matrix.diagonal + 1
+    ok = np.ones(2, dtype=np.bool_)
+    for block in prange(2):
+        dense_row = np.zeros(n)
+        ok[block] = _factor_rows(
+            matrix, shift, bounds[block], bounds[block + 1], dense_row, upper_fill, out
+        )
+    if not (ok[0] and ok[1]):
+        return False
+    return _factor_rows(matrix, shift, matrix.blocks[1], n, np.zeros(n), upper_fill, out)
+
+
+@njit(cache=True, parallel=True)
+def compact_factor(matrix: Matrix, factor: np.ndarray) -> Factor:
+    """The :class:`Factor` of an IC(0) factor in A's layout (from :func:`incomplete_cholesky`)."""
+    n = matrix.indptr.shape[0] - 1
+    lower_start = np.zeros(n + 1, dtype=np.int64)
+    upper_start = np.zeros(n + 1, dtype=np.int64)
     for i in range(n):
-        total = r[i]
-        for p in range(indptr[i], diagonal[i]):
-            total -= factor[p] * z[indices[p]]
-        z[i] = total / factor[diagonal[i]]
-    for i in range(n - 1, -1, -1):
-        z[i] /= factor[diagonal[i]]
-        for p in range(indptr[i], diagonal[i]):
-            z[indices[p]] -= factor[p] * z[i]
+        lower_start[i + 1] = lower_start[i] + matrix.diagonal[i] - matrix.indptr[i]
+    for t in range(n):  # row i = n - 1 - t
+        upper_start[t + 1] = upper_start[t] + matrix.indptr[n - t] - matrix.diagonal[n - 1 - t] - 1
+    lower_indices = np.empty(lower_start[n], dtype=np.int32)
+    lower_data = np.empty(lower_start[n])
+    upper_indices = np.empty(upper_start[n], dtype=np.int32)
+    upper_data = np.empty(upper_start[n])
+    inverse_diagonal = np.empty(n)
+    for i in prange(n):
+        q = lower_start[i]
+        for p in range(matrix.indptr[i], matrix.diagonal[i]):
+            lower_indices[q] = matrix.indices[p]
+            lower_data[q] = factor[p]
+            q += 1
+        q = upper_start[n - 1 - i]
+        for p in range(matrix.diagonal[i] + 1, matrix.indptr[i + 1]):
+            upper_indices[q] = matrix.indices[p]
+            upper_data[q] = factor[p]
+            q += 1
+        inverse_diagonal[i] = 1.0 / factor[matrix.diagonal[i]]
+    return Factor(
+        lower_start, lower_indices, lower_data, upper_start, upper_indices, upper_data,
+        inverse_diagonal,
+    )  # fmt: skip
+
+
+def no_factor() -> Factor:
+    """An empty :class:`Factor`, for plain CG."""
+    start = np.zeros(1, dtype=np.int64)
+    indices = np.empty(0, dtype=np.int32)
+    data = np.empty(0)
+    return Factor(start, indices, data, start, indices, data, np.empty(0))
+
+
+@njit(cache=True)
+def _forward(factor: Factor, r: np.ndarray, z: np.ndarray, first: int, last: int) -> None:
+    """Forward substitution ``L z = r`` on rows ``[first, last)``."""
+    for i in range(first, last):
+        total = 0.0
+        for p in range(factor.lower_start[i], factor.lower_start[i + 1]):
+            total += factor.lower_data[p] * z[factor.lower_indices[p]]
+        z[i] = (r[i] - total) * factor.inverse_diagonal[i]
+
+
+@njit(cache=True)
+def _backward(factor: Factor, z: np.ndarray, first: int, last: int) -> None:
+    """Backward substitution ``L^T z = z`` on rows ``last - 1`` down to ``first``."""
+    n = z.shape[0]
+    for t in range(n - last, n - first):
+        i = n - 1 - t
+        total = 0.0
+        for p in range(factor.upper_start[t], factor.upper_start[t + 1]):
+            total += factor.upper_data[p] * z[factor.upper_indices[p]]
+        z[i] = (z[i] - total) * factor.inverse_diagonal[i]
+
+
+@njit(cache=True, parallel=True)
+def _precondition(blocks: np.ndarray, factor: Factor, r: np.ndarray, z: np.ndarray) -> None:
+    """``z = (L L^T)^-1 r``: forward substitution on L's rows, then backward substitution on
+    L^T's rows. The two blocks of ``blocks`` (:class:`Matrix`) in parallel: forward blocks
+    then separator, backward separator then blocks."""
+    n = r.shape[0]
+    bounds = np.array([0, blocks[0], blocks[1]], dtype=np.int64)
+    for block in prange(2):
+        _forward(factor, r, z, bounds[block], bounds[block + 1])
+    _forward(factor, r, z, blocks[1], n)
+    _backward(factor, z, blocks[1], n)
+    for block in prange(2):
+        _backward(factor, z, bounds[block], bounds[block + 1])
 
 
 @njit(cache=True)
@@ -531,7 +752,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
 @njit(cache=True)
 def conjugate_gradient(
     matrix: Matrix,
-    factor: np.ndarray,
+    factor: Factor,
     preconditioned: bool,
     b: np.ndarray,
     x: np.ndarray,
@@ -541,8 +762,8 @@ def conjugate_gradient(
     """(Preconditioned) conjugate gradients for ``A x = b``, Eq. (F12), from the initial guess
     in ``x`` (overwritten by the solution). Stops when ``|b - A x| <= tolerance |b|``.
 
-    With ``preconditioned`` the IC(0) factor in ``factor`` (from :func:`incomplete_cholesky`)
-    preconditions; otherwise plain CG. Returns (iterations, relative residual).
+    With ``preconditioned`` the IC(0) factor ``factor`` (:func:`compact_factor`) preconditions;
+    otherwise plain CG (``factor`` unused). Returns (iterations, relative residual).
     """
     n = b.shape[0]
     norm_b = math.sqrt(_dot(b, b))
@@ -557,7 +778,7 @@ def conjugate_gradient(
         r[i] = b[i] - r[i]
     z = np.empty(n)
     if preconditioned:
-        _precondition(matrix, factor, r, z)
+        _precondition(matrix.blocks, factor, r, z)
     else:
         z[:] = r
     d = z.copy()
@@ -579,7 +800,7 @@ def conjugate_gradient(
         if not math.isfinite(residual):
             break
         if preconditioned:
-            _precondition(matrix, factor, r, z)
+            _precondition(matrix.blocks, factor, r, z)
         else:
             z[:] = r
         rz_new = _dot(r, z)

@@ -33,6 +33,10 @@ SURFACES = ("standard", "neighbour-count")
 SOLVERS = ("iccg", "cg")
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
+# PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
+# that IC(0) and its triangular solves run on two threads (kernels.number_unknowns); smaller
+# ones keep one block: they are fast anyway, and the ordering can cost an iteration.
+TWO_BLOCK_ROWS = 16384
 
 
 class FluidDiverged(SimulationUnstable):
@@ -153,13 +157,15 @@ def lattice_reference(dim: int, l0: float, re: float) -> LatticeReference:
 
 
 class PoissonSystem(NamedTuple):
-    """``A p = b`` over the unknown particles (``unknown`` (N,) bool, in particle order): A in
-    1/m2, b (n,) Pa/m2; ``surface`` the number of free-surface particles; ``neighbours`` the
-    list at the positions it was built on."""
+    """``A p = b`` over the unknown particles (``unknown`` (N,) bool): A in 1/m2, b (n,) Pa/m2,
+    row r standing for particle ``particles[r]`` ((n,) int64; rows are in the two-block order
+    of :class:`kernels.Matrix`); ``surface`` the number of free-surface particles;
+    ``neighbours`` the list at the positions it was built on."""
 
     matrix: kernels.Matrix
     rhs: np.ndarray
     unknown: np.ndarray
+    particles: np.ndarray
     surface: int
     neighbours: kernels.Neighbours
 
@@ -183,7 +189,8 @@ class MPSSolver:
 
     State (N particles, D = ``params.dim``): ``position`` (N, D) m, ``velocity`` (N, D) m/s,
     ``pressure`` (N,) Pa (also the warm start of the next solve), ``number_density`` (N,)
-    dimensionless (n* of the last step), ``alive`` (N,) bool, ``kind`` (N,) int8, ``time`` s.
+    dimensionless (n* of the last step; 0 for dummies, which get no neighbour-list row),
+    ``alive`` (N,) bool, ``kind`` (N,) int8, ``time`` s.
     Walls and dummies keep their velocity (zero for a fixed tank) and position. Dummy particles
     only add number density: their pressure is 0 and they are ignored by the gradient. Negative
     pressures of the solution are clipped to 0.
@@ -300,9 +307,11 @@ class MPSSolver:
             stats.seconds[name] = stats.seconds.get(name, 0.0) + now - clock
             clock = now
 
-        # Neighbours at r^k
+        # Neighbours at r^k: rows for the particles the explicit stage moves (and, for the mixed
+        # source, the walls, whose n^k enters the PPE)
+        moving = self.kind == FLUID if p.source == "standard" else self.kind != DUMMY
         nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            *kernels.neighbour_list(self.position, self.alive, moving, self.search_radius),
             self.search_radius,
         )
         if p.source == "mixed":  # n^k for the mixed source [Tanaka & Masunaga 2010]
@@ -330,10 +339,10 @@ class MPSSolver:
         # Neighbours, number density n*, free surface and PPE at r*, Eq. (F2), (F7)-(F9)
         system = self.poisson_system(dt, clock=lap)
         stats.surface = system.surface
-        matrix, rhs, unknown = system.matrix, system.rhs, system.unknown
+        matrix, rhs, particles = system.matrix, system.rhs, system.particles
 
         # Solve by ICCG (or CG), warm-started from the previous pressure, Eq. (F11)-(F12)
-        solution = self.pressure[unknown].copy()
+        solution = self.pressure[particles]
         try:
             iterations, residual, stats.ic_shift = solve(
                 matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations
@@ -353,7 +362,7 @@ class MPSSolver:
                 residual=residual,
             )
         self.pressure[:] = 0.0
-        self.pressure[unknown] = np.maximum(solution, 0.0)  # negative pressures clipped
+        self.pressure[particles] = np.maximum(solution, 0.0)  # negative pressures clipped
         lap("solve")
 
         # Pressure gradient and correction, Eq. (F10), (F13)
@@ -386,8 +395,10 @@ class MPSSolver:
         ``clock`` (if given) is called with the phase names "neighbours" and "assembly"."""
         p = self.params
         c = self.constants
+        # Dummies need no row: they only complete the number density of their neighbours.
+        solid = self.alive & (self.kind != DUMMY)
         nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, self.search_radius),
+            *kernels.neighbour_list(self.position, self.alive, solid, self.search_radius),
             self.search_radius,
         )
         kernels.number_density(
@@ -395,40 +406,46 @@ class MPSSolver:
         )
         if clock is not None:
             clock("neighbours")
-        solid = self.alive & (self.kind != DUMMY)
         surface = self.number_density < p.surface_threshold * c.n0
         if p.surface == "neighbour-count":
             count0 = self.reference["number_density"].count
             surface |= self._neighbour_count < p.surface_neighbour_threshold * count0
         surface &= solid
         unknown = solid & ~surface
-        n_rows = kernels.number_unknowns(unknown, self._row_of)
+        blocks = kernels.number_unknowns(
+            unknown, self.position, c.re_laplacian, TWO_BLOCK_ROWS, self._row_of
+        )
+        n_rows = int(blocks[2])
+        particles = np.empty(n_rows, dtype=np.int64)
+        particles[self._row_of[unknown]] = np.flatnonzero(unknown)
         shift = p.density * p.compressibility / dt**2
         matrix = kernels.Matrix(
-            *kernels.assemble_poisson(nb, self.kind, self.alive, self._row_of, n_rows, c, shift)
+            *kernels.assemble_poisson(nb, self.kind, self.alive, self._row_of, n_rows, c, shift),
+            blocks[:2].copy(),
         )
-        rhs = self.poisson_source(dt, unknown, nb)
+        rhs = self.poisson_source(dt, particles, nb)
         if clock is not None:
             clock("assembly")
-        return PoissonSystem(matrix, rhs, unknown, int(surface.sum()), nb)
+        return PoissonSystem(matrix, rhs, unknown, particles, int(surface.sum()), nb)
 
     def poisson_source(
-        self, dt: float, unknown: np.ndarray, neighbours: kernels.Neighbours
+        self, dt: float, particles: np.ndarray, neighbours: kernels.Neighbours
     ) -> np.ndarray:
-        """Right-hand side b of ``A p = b`` for the unknown particles (Pa/m2), Eq. (F8)-(F9):
+        """Right-hand side b of ``A p = b`` for the unknown particles ``particles`` ((n,) int64,
+        in row order) (Pa/m2), Eq. (F8)-(F9):
         standard ``(rho/dt^2)(n* - n0)/n0``; mixed ``-(rho/dt) div u* + gamma (rho/dt^2)
         (n^k - n0)/n0`` (n^k from the start of the step)."""
         p = self.params
         c = self.constants
         if p.source == "standard":
-            deviation = (self.number_density[unknown] - c.n0) / c.n0
+            deviation = (self.number_density[particles] - c.n0) / c.n0
             return p.density / dt**2 * deviation
         divergence = np.zeros(self.pressure.shape[0])
         kernels.velocity_divergence(
             self.position, self.velocity, self.kind, self.alive, neighbours, c, divergence,
         )  # fmt: skip
-        deviation = (self._scratch[unknown] - c.n0) / c.n0
-        return -p.density / dt * divergence[unknown] + (
+        deviation = (self._scratch[particles] - c.n0) / c.n0
+        return -p.density / dt * divergence[particles] + (
             p.mixed_relaxation * p.density / dt**2 * deviation
         )
 
@@ -469,9 +486,10 @@ def solve(
     IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a pivot is
     not positive. Returns (iterations, relative residual, shift used).
     """
-    factor = np.zeros_like(matrix.data)
     shift = 0.0
+    compact = kernels.no_factor()
     if method == "iccg":
+        factor = np.zeros_like(matrix.data)
         for shift in (0.0, *IC_SHIFTS):
             if kernels.incomplete_cholesky(matrix, shift, factor):
                 break
@@ -482,8 +500,9 @@ def solve(
                 iterations=0,
                 residual=math.inf,
             )
+        compact = kernels.compact_factor(matrix, factor)
     iterations, residual = kernels.conjugate_gradient(
-        matrix, factor, method == "iccg", rhs, solution, tolerance, max_iterations
+        matrix, compact, method == "iccg", rhs, solution, tolerance, max_iterations
     )
     return iterations, residual, shift
 
