@@ -4,6 +4,7 @@ without POV-Ray, and results without tentacles (fluid only)."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -98,3 +99,30 @@ def test_a_phase_shift_shifts_the_pulse_not_the_place(brown: jellysim.Result) ->
         # Same mean swim: the heights differ only by the pulse's wobble about the mean line
         # (brown-jelly swims 0.3 m/s; a shifted pulse moves it by at most 0.1 m).
         assert np.abs(centres[:, 2] - first[:, 2]).max() < 0.1
+
+
+def test_fluid_around_a_jellyfish_is_left_out_unless_asked(
+    brown: jellysim.Result, tmp_path: Path
+) -> None:
+    """--fluid auto draws no particles when a jellyfish swims in the fluid (the tank would hide
+    it) and frames the jellyfish; --fluid spheres draws every live particle."""
+    if povray.find_povray() is None and not os.environ.get("CI"):
+        pytest.skip("POV-Ray is not installed")
+    folder = tmp_path / "in-water"
+    folder.mkdir()
+    shutil.copy(brown.path, folder / "result.h5")
+    frames, count = brown.frames, 40
+    rng = np.random.default_rng(1)
+    with h5py.File(folder / "result.h5", "a") as f:
+        f["fluid/position"] = rng.uniform(-3.0, 3.0, (frames, count, 3))
+        f["fluid/alive"] = np.ones((frames, count), dtype=bool)
+    spheres = {}
+    with jellysim.open_result(folder) as result:
+        for mode in ("auto", "spheres", "none"):
+            out = tmp_path / mode
+            render([result], out, fluid=mode, size=(32, 32), frames=(0, 1), video=False)
+            spheres[mode] = (out / "pov" / "frame_00000.pov").read_text().count("sphere{")
+        with pytest.raises(jellysim.InputError, match="--fluid"):
+            render([result], tmp_path / "bad", fluid="cubes", size=(32, 32), video=False)
+    assert spheres["auto"] == spheres["none"]
+    assert spheres["spheres"] == spheres["none"] + count

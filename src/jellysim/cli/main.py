@@ -80,7 +80,13 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument(
         "--interpolation", type=int, metavar="N", help="drawn tentacles per simulated one"
     )
-    render.add_argument("--fluid", choices=("spheres", "surface"), default="spheres")
+    render.add_argument(
+        "--fluid",
+        choices=("auto", "spheres", "surface", "none"),
+        default="auto",
+        help="fluid particles as spheres, one blobby surface, or not at all (auto: spheres for "
+        "fluid-only results, none when a jellyfish swims in the fluid)",
+    )
     render.add_argument("--seed", type=int, default=0, help="seed of the school's layout")
     render.add_argument("--frames", metavar="A:B", help="render frames A to B-1 only")
     render.add_argument("--gif", action="store_true", help="also write movie.gif")

@@ -163,15 +163,20 @@ def _shift_hue(color: tuple[float, float, float], turn: float) -> tuple[float, f
     return (r, g, b)
 
 
+FLUID_MODES = ("auto", "spheres", "surface", "none")
+
+
 def make_members(
     results: Sequence[Result],
     school: int,
     interpolation: int | None,
     seed: int,
     look_overrides: Sequence[str] = (),
+    fluid: bool = True,
 ) -> list[Member]:
     """The jellyfish to draw: every result once, or a school of ``school`` jellyfish cycling
-    through the results on a jittered grid with random phase shifts and hue shifts."""
+    through the results on a jittered grid with random phase shifts and hue shifts; their fluid
+    particles too when ``fluid``."""
     from jellysim.interpolation import interpolate_result
 
     drawn = [
@@ -182,7 +187,7 @@ def make_members(
     ]
     count = max(school, len(results))
     rng = np.random.default_rng(seed)
-    size = max(_extent(r, d) for r, d in zip(results, drawn, strict=True))
+    size = max(_extent(r, d, fluid) for r, d in zip(results, drawn, strict=True))
     columns = math.ceil(math.sqrt(count))
     members = []
     for index in range(count):
@@ -210,7 +215,7 @@ def make_members(
                     tentacle_color=_shift_hue(look.tentacle_color, turn),
                 )
         has_bell = "bell/surface_vertices" in result.file
-        has_fluid = "fluid/position" in result.file
+        has_fluid = fluid and "fluid/position" in result.file
         shift = _phase_shift(result, phase) if phase else None
         members.append(
             Member(
@@ -244,12 +249,12 @@ def _phase_shift(result: Result, phase: int) -> np.ndarray | None:
     return trend - trend[(np.arange(frames) + phase) % frames]
 
 
-def _extent(result: Result, drawn: np.ndarray) -> float:
-    """The largest extent (m) of one jellyfish (or its fluid) in any one frame: its size, not
-    how far it swims."""
+def _extent(result: Result, drawn: np.ndarray, fluid: bool = True) -> float:
+    """The largest extent (m) of one jellyfish (and its fluid, when drawn) in any one frame: its
+    size, not how far it swims."""
     frames = result.frames
     parts = [drawn.reshape(frames, -1, 3)]
-    if "fluid/position" in result.file:
+    if fluid and "fluid/position" in result.file:
         parts.append(to_world(np.asarray(result.file["fluid/position"][:], dtype=np.float64)))
     if "bell/surface_vertices" in result.file:
         parts.append(np.asarray(result.file["bell/surface_vertices"][:], dtype=np.float64))
@@ -366,7 +371,7 @@ def render(
     room: bool = False,
     school: int = 1,
     interpolation: int | None = None,
-    fluid: str = "spheres",
+    fluid: str = "auto",
     seed: int = 0,
     gif: bool = False,
     video: bool = True,
@@ -378,7 +383,11 @@ def render(
     notice: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Render ``results`` into ``out``: ``frames/``, ``pov/`` (POV-Ray scenes), ``movie.mp4``
-    and optionally ``movie.gif``. Returns paths and timings."""
+    and optionally ``movie.gif``. Returns paths and timings.
+
+    ``fluid``: "spheres", "surface" (one blobby surface), "none", or "auto": the fluid particles
+    as spheres for fluid-only results, not drawn when there is a jellyfish (its water would hide
+    it; the scene's water colour and fog stand for the water)."""
     from jellysim.render import povray
 
     say = notice or (lambda text: print(text, file=sys.stderr))
@@ -395,6 +404,13 @@ def render(
                 "notice: POV-Ray not found (sudo apt-get install povray); "
                 "using the built-in preview renderer"
             )
+    if fluid not in FLUID_MODES:
+        raise InputError(f"--fluid {fluid}: expected one of {', '.join(FLUID_MODES)}")
+    if fluid == "auto":
+        jellyfish = any(
+            "tentacles/position" in r.file or "bell/surface_vertices" in r.file for r in results
+        )
+        fluid = "none" if jellyfish else "spheres"
     if quality not in povray.QUALITIES:
         raise InputError(f"--quality {quality}: expected one of draft, final")
     for result in results:
@@ -422,7 +438,9 @@ def render(
     _check_settings(out, settings, force)
     (out / SETTINGS_FILE).write_text(settings.to_json(), encoding="utf-8")
 
-    members = make_members(results, school, interpolation, seed, look_overrides)
+    members = make_members(
+        results, school, interpolation, seed, look_overrides, fluid=fluid != "none"
+    )
     cameras, extent, camera_mode = frame_cameras(members, frame_count, size, camera)
     room_box = None
     if room:
