@@ -179,3 +179,18 @@ def test_three_dimensional_tank_runs() -> None:
     bottom = fluid_mask & (solver.position[:, 2] < 1.5 * l0)
     # bottom pressure of the same order as rho g h (0.06 m: 589 Pa)
     assert 200.0 < solver.pressure[bottom].mean() < 1500.0
+
+
+def test_substep_covers_the_rest_in_equal_steps_within_the_limit() -> None:
+    from jellysim.fluid.mps import substep
+
+    assert substep(0.01, 0.02) == 0.01
+    assert substep(0.05, 0.0065) == pytest.approx(0.05 / 8)
+    # stepping to the end with a fixed limit gives equal steps, none shorter than half the limit
+    remaining, steps = 0.05, []
+    while remaining > 1e-15:
+        dt = substep(remaining, 0.0065)
+        steps.append(dt)
+        remaining -= dt
+    assert len(steps) == 8
+    assert max(steps) - min(steps) < 1e-15

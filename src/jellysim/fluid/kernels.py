@@ -268,26 +268,49 @@ def neighbour_list(
     offsets = _cell_offsets(dim, CELLS_PER_RADIUS)
     radius2 = radius * radius
 
-    row_count = np.zeros(n + 1, dtype=np.int64)
-    for i in prange(n):  # first pass: count each row
+    # The rows to fill, compacted: the parallel loops split their iterations evenly between
+    # the threads, and rows are not spread evenly over the particles (water first, then the
+    # tank's walls mixed with its row-less dummies).
+    active = np.empty(n, dtype=np.int64)
+    n_active = 0
+    for i in range(n):
         if cell_of[i] >= 0 and rows[i]:
-            row_count[i + 1] = _count_cells(
-                i, position, coords, shape, stride, offsets, counts, member_position, radius2
-            )
+            active[n_active] = i
+            n_active += 1
+    row_count = np.zeros(n + 1, dtype=np.int64)
+    for a in prange(n_active):  # first pass: count each row
+        i = active[a]
+        row_count[i + 1] = _count_cells(
+            i, position, coords, shape, stride, offsets, counts, member_position, radius2
+        )
     for i in range(n):
         row_count[i + 1] += row_count[i]
     index = np.empty(row_count[n], dtype=np.int64)
     distance = np.empty(row_count[n])
-    for i in prange(n):  # second pass: fill each row
-        if cell_of[i] >= 0 and rows[i]:
-            _scan_cells(
-                i, position, coords, shape, stride, offsets, counts, members, member_position,
-                radius2, index, distance, row_count[i],
-            )  # fmt: skip
+    for a in prange(n_active):  # second pass: fill each row
+        i = active[a]
+        _scan_cells(
+            i, position, coords, shape, stride, offsets, counts, members, member_position,
+            radius2, index, distance, row_count[i],
+        )  # fmt: skip
     return row_count, index, distance
 
 
 # ------------------------------------------------------------------------------- particle models
+
+
+@njit(cache=True)
+def _fluid_rows(kind: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """Indices of the live fluid particles. The particle models loop over these rather than
+    over all particles: parallel loops split their iterations evenly between the threads, and
+    the fluid particles are not spread evenly (water first, then the tank)."""
+    active = np.empty(kind.shape[0], dtype=np.int64)
+    count = 0
+    for i in range(kind.shape[0]):
+        if alive[i] and kind[i] == FLUID:
+            active[count] = i
+            count += 1
+    return active[:count]
 
 
 @njit(cache=True, parallel=True, fastmath=FAST)
@@ -298,15 +321,24 @@ def number_density(
     of every kind (dummies included) into ``out`` (0 for particles without a neighbour-list row);
     ``count`` receives the number of neighbours
     closer than r_e (for neighbour-count surface detection)."""
-    for i in prange(alive.shape[0]):
+    n = alive.shape[0]
+    active = np.empty(n, dtype=np.int64)  # live rows, compacted (see _fluid_rows)
+    n_active = 0
+    for i in range(n):
+        out[i] = 0.0
+        count[i] = 0
+        if alive[i] and neighbours.start[i + 1] > neighbours.start[i]:
+            active[n_active] = i
+            n_active += 1
+    for a in prange(n_active):
+        i = active[a]
         total = 0.0
         found = 0
-        if alive[i]:
-            for m in range(neighbours.start[i], neighbours.start[i + 1]):
-                r = neighbours.distance[m]
-                if r < re:
-                    total += weight(r, re)
-                    found += 1
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            r = neighbours.distance[m]
+            if r < re:
+                total += weight(r, re)
+                found += 1
         out[i] = total
         count[i] = found
 
@@ -340,11 +372,12 @@ def explicit_stage(
         / (constants.lambda_laplacian * constants.n0_laplacian)
     )
     for i in prange(n):
-        if not alive[i] or kind[i] != FLUID:
-            for k in range(dim):
-                out_velocity[i, k] = velocity[i, k]
-                out_position[i, k] = position[i, k]
-            continue
+        for k in range(dim):
+            out_velocity[i, k] = velocity[i, k]
+            out_position[i, k] = position[i, k]
+    active = _fluid_rows(kind, alive)
+    for a in prange(active.shape[0]):
+        i = active[a]
         laplacian = np.zeros(dim)
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             r = neighbours.distance[m]
@@ -388,10 +421,13 @@ def collision(
         for k in range(dim):
             out_velocity[i, k] = velocity[i, k]
             out_position[i, k] = position[i, k]
-        if not alive[i] or kind[i] != FLUID:
-            continue
+    active = _fluid_rows(kind, alive)
+    for a in prange(active.shape[0]):
+        i = active[a]
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             j = neighbours.indices[m]
+            if not alive[j]:
+                continue
             r2 = 0.0
             for k in range(dim):
                 d = position[j, k] - position[i, k]
@@ -842,8 +878,9 @@ def pressure_correction(
         for k in range(dim):
             out_velocity[i, k] = velocity[i, k]
             out_position[i, k] = position[i, k]
-        if not alive[i] or kind[i] != FLUID:
-            continue
+    active = _fluid_rows(kind, alive)
+    for a in prange(active.shape[0]):
+        i = active[a]
         lowest = pressure[i]
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             j = neighbours.indices[m]

@@ -473,6 +473,20 @@ class MPSSolver:
         self.time = float(arrays["time"])
 
 
+def substep(remaining: float, limit: float) -> float:
+    """The step (s) that covers ``remaining`` (s) in equal steps of at most ``limit`` (s).
+
+    Landing on a frame time by shortening the last step would leave an arbitrarily short step,
+    and the standard source divides the number-density error left by the steps before by dt^2:
+    a step of 1e-6 s then corrects that error as fully as a whole step does, and the velocity
+    change (that displacement over dt) becomes a kick. Equal steps keep every step above half
+    the limit.
+    """
+    if remaining <= limit:
+        return remaining
+    return remaining / math.ceil(remaining / limit)
+
+
 def solve(
     matrix: kernels.Matrix,
     rhs: np.ndarray,
@@ -518,4 +532,5 @@ __all__ = [
     "StepStats",
     "lattice_reference",
     "solve",
+    "substep",
 ]

@@ -3,8 +3,8 @@
 The same frame-loop contract as :class:`jellysim.simulation.Simulation` (``step_frame``,
 ``frame_values``, ``datasets``, ``writer``, ``checkpoint_state``/``restore``), so that
 :func:`jellysim.simulation.run` stores, checkpoints, resumes and watches it the same way.
-Within a frame the fluid takes steps of the stable dt the solver chooses (CFL, acceleration and
-viscous limits), the last one shortened to land on the frame time.
+Within a frame the fluid takes equal steps of at most the stable dt the solver chooses (CFL,
+acceleration and viscous limits), landing on the frame time (:func:`jellysim.fluid.mps.substep`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from jellysim.config import Scene
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.geometry import FLUID, tank, water_block
-from jellysim.fluid.mps import FluidDiverged, MPSParameters, MPSSolver
+from jellysim.fluid.mps import FluidDiverged, MPSParameters, MPSSolver, substep
 from jellysim.io.result import Dataset, ResultWriter
 
 log = logging.getLogger(__name__)
@@ -99,7 +99,7 @@ class FluidSimulation:
         solver = self.solver
         iterations, residual, steps = 0, 0.0, 0
         while solver.time < end - 1e-12 * self.frame_dt:
-            dt = min(solver.stable_dt(), end - solver.time)
+            dt = substep(end - solver.time, solver.stable_dt())
             try:
                 stats = solver.step(dt)
             except FluidDiverged as err:

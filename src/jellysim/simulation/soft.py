@@ -27,7 +27,7 @@ import numpy as np
 from jellysim.bell.soft import SoftBell
 from jellysim.config import Scene
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.mps import FluidDiverged, MPSSolver
+from jellysim.fluid.mps import FluidDiverged, MPSSolver, substep
 from jellysim.io.result import Dataset, ResultWriter
 from jellysim.simulation.fluid import fluid_particles, mps_parameters
 
@@ -102,7 +102,7 @@ class SoftBellSimulation:
         iterations, residual, steps = 0, 0.0, 0
         volume = self.l0**3
         while solver.time < end - 1e-12 * self.frame_dt:
-            dt = min(solver.stable_dt(), self.spring_dt, end - solver.time)
+            dt = substep(end - solver.time, min(solver.stable_dt(), self.spring_dt))
             bell.spring_forces(solver.position[rows], solver.time, self._bell_force)
             self._force[rows] = self._bell_force / volume  # force density, N/m3
             try:
