@@ -1,0 +1,124 @@
+"""The 2-D dam break side by side: jellysim's MPS against PySPH 1.0b2's WCSPH (issue 5).
+
+    .venv/bin/python benchmarks/bench_pysph.py [--per-width 40 ...] [--threads 2]
+        [--pysph .venv-pysph/bin/python]   # the venv of benchmarks/pysph_env.sh
+
+Martin & Moyce's n^2 = 2 column (width a, height 2a) collapsing, at N particles across a, to
+T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after the other:
+
+- jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank) at fluid.spacing = a / N, stepped
+  by the solver at its own stable dt; the surge front recorded after every step.
+- PySPH: its example dam_break_2d (a = 1 m, a 4a tank, WCSPH with its adaptive step) at
+  dx = a / N, run in PySPH's own venv by benchmarks/pysph_dam_break.py; the front at 200
+  outputs. Its block has N + 1 particles across (both ends included).
+
+Both fronts are measured the same way (jellysim.reference: the largest x of fluid particles
+within 0.1 a of the floor, from the wall's inner face, over a) and compared with Martin & Moyce
+for T <= 3, raw and after the best time shift of at most 0.3. Times are the wall time of the
+stepping (jellysim after one compiling step, PySPH after its set-up, which compiles its code).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+import jellysim
+from jellysim.fluid.geometry import FLUID
+from jellysim.reference import front_errors, surge_front
+from jellysim.simulation.fluid import FluidSimulation
+
+HERE = Path(__file__).resolve().parent
+UNTIL = 3.3
+
+
+def run_mps(per_width: int) -> dict[str, object]:
+    scene = jellysim.load_scene("dam-break-2d", {"fluid.spacing": 0.1 / per_width})
+    solver = FluidSimulation(scene).solver
+    a = scene.fluid.water_width
+    scale = math.sqrt(2 * 9.81 / a)
+    fluid = solver.kind == FLUID
+    times = [0.0]
+    fronts = [float(surge_front(solver.position[None], solver.alive[None], fluid, a)[0])]
+    probe_dt = min(solver.stable_dt(), 1e-6)
+    warm = FluidSimulation(scene).solver
+    warm.step(probe_dt)  # compile or load from the cache, untimed
+    steps = 0
+    start = time.perf_counter()
+    while solver.time * scale < UNTIL:
+        solver.step(solver.stable_dt())
+        steps += 1
+        times.append(solver.time * scale)
+        fronts.append(float(surge_front(solver.position[None], solver.alive[None], fluid, a)[0]))
+    seconds = time.perf_counter() - start
+    return {
+        "seconds": seconds,
+        "steps": steps,
+        "fluid": int(fluid.sum()),
+        "times": times,
+        "fronts": fronts,
+    }
+
+
+def run_pysph(python: str, per_width: int, threads: int) -> dict[str, object]:
+    with tempfile.TemporaryDirectory() as out:
+        command = [
+            python, str(HERE / "pysph_dam_break.py"), "--per-width", str(per_width),
+            "--until", str(UNTIL), "--threads", str(threads), "--out", out,
+        ]  # fmt: skip
+        env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
+        done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    if done.returncode != 0:
+        sys.exit(f"PySPH failed ({done.returncode}): {done.stderr.strip()[-500:]}")
+    last = [line for line in done.stdout.splitlines() if line.startswith("{")][-1]
+    result: dict[str, object] = json.loads(last)
+    return result
+
+
+def describe(name: str, run: dict[str, object]) -> str:
+    times = np.asarray(run["times"])
+    fronts = np.asarray(run["fronts"])
+    raw, shifted, shift = front_errors(times, fronts, until=3.0)
+    seconds = float(run["seconds"])  # type: ignore[arg-type]
+    steps = int(run["steps"])  # type: ignore[call-overload]
+    return (
+        f"| {name} | {run['fluid']} | {steps} | {seconds:.1f} | {steps / seconds:.0f} | "
+        f"{100 * raw:.1f} % | {100 * shifted:.1f} % ({shift:+.2f}) |"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--per-width", type=int, action="append")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--pysph", default=str(HERE.parent / ".venv-pysph" / "bin" / "python"))
+    args = parser.parse_args()
+    if not Path(args.pysph).exists():
+        sys.exit(f"no PySPH Python at {args.pysph}: build it with benchmarks/pysph_env.sh")
+    numba.set_num_threads(args.threads)
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores; numba {numba.__version__}; "
+        f"{args.threads} threads each; to T = {UNTIL}"
+    )
+    print("| code, particles across a | fluid particles | steps | wall s | steps/s | "
+          "front error, raw | shifted (shift) |")  # fmt: skip
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for per_width in args.per_width or [40]:
+        print(describe(f"jellysim MPS, {per_width}", run_mps(per_width)), flush=True)
+        print(describe(f"PySPH WCSPH, {per_width}", run_pysph(args.pysph, per_width, args.threads)),
+              flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
