@@ -6,8 +6,8 @@ occured between contraction and propulsion of the umbrella", paper §5).
 A coarse configuration of the moon-jelly preset (l0 = 0.25 m, R = 2 m, 14,564 fluid and 448 bell
 particles, k = 31.25 N/m = 20 N/m x 0.25 / 0.16, the preset's material at this spacing: k ~ l0,
 docs/theory/soft-bell.md §2), three 2 s pulses. Measured on 2026-11-23 (docs/soft-bell.md): rises
-0.118, 0.264, 0.266 m per pulse against exactly 0 with the muscle off; peak contraction 0.35-0.47;
-speed peaks 1.5 s after the contraction (correlation 0.57).
+0.105, 0.253, 0.072 m per pulse against exactly 0 with the muscle off; peak contraction 0.37-0.44;
+speed best aligned 1.9 s after the contraction (correlation 0.47; -0.85 at zero lag).
 """
 
 from __future__ import annotations
