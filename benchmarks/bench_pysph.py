@@ -1,7 +1,8 @@
 """The 2-D dam break side by side: jellysim's MPS against PySPH 1.0b2's WCSPH (issue 5).
 
     .venv/bin/python benchmarks/bench_pysph.py [--per-width 40 ...] [--threads 2]
-        [--pysph .venv-pysph/bin/python]   # the venv of benchmarks/pysph_env.sh
+        [--scheme wcsph ...] [--no-mps] [--pysph .venv-pysph/bin/python]
+    # --pysph: the venv of benchmarks/pysph_env.sh
 
 Martin & Moyce's n^2 = 2 column (width a, height 2a) collapsing, at N particles across a, to
 T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after the other:
@@ -71,22 +72,29 @@ def run_mps(per_width: int) -> dict[str, object]:
     }
 
 
-def run_pysph(python: str, per_width: int, threads: int) -> dict[str, object]:
+def run_pysph(python: str, per_width: int, threads: int, scheme: str) -> dict[str, object] | str:
+    """PySPH's result, or why it has none (a scheme that does not finish is reported, not
+    fatal: PySPH 1.0b2's WCSPH crashes at 80 particles across a)."""
     with tempfile.TemporaryDirectory() as out:
         command = [
             python, str(HERE / "pysph_dam_break.py"), "--per-width", str(per_width),
-            "--until", str(UNTIL), "--threads", str(threads), "--out", out,
+            "--until", str(UNTIL), "--threads", str(threads), "--scheme", scheme, "--out", out,
         ]  # fmt: skip
         env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
+        clock = time.perf_counter()
         done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+        seconds = time.perf_counter() - clock
     if done.returncode != 0:
-        sys.exit(f"PySPH failed ({done.returncode}): {done.stderr.strip()[-500:]}")
+        reason = done.stderr.strip().splitlines()[-1:] or [f"exit status {done.returncode}"]
+        return f"did not finish: exit status {done.returncode} after {seconds:.0f} s ({reason[0]})"
     last = [line for line in done.stdout.splitlines() if line.startswith("{")][-1]
     result: dict[str, object] = json.loads(last)
     return result
 
 
-def describe(name: str, run: dict[str, object]) -> str:
+def describe(name: str, run: dict[str, object] | str) -> str:
+    if isinstance(run, str):
+        return f"| {name} | {run} | | | | | |"
     times = np.asarray(run["times"])
     fronts = np.asarray(run["fronts"])
     raw, shifted, shift = front_errors(times, fronts, until=3.0)
@@ -102,6 +110,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--per-width", type=int, action="append")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--scheme", action="append", help="PySPH scheme(s); default wcsph")
+    parser.add_argument("--no-mps", action="store_true", help="run PySPH only")
     parser.add_argument("--pysph", default=str(HERE.parent / ".venv-pysph" / "bin" / "python"))
     args = parser.parse_args()
     if not Path(args.pysph).exists():
@@ -115,9 +125,11 @@ def main() -> None:
           "front error, raw | shifted (shift) |")  # fmt: skip
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for per_width in args.per_width or [40]:
-        print(describe(f"jellysim MPS, {per_width}", run_mps(per_width)), flush=True)
-        print(describe(f"PySPH WCSPH, {per_width}", run_pysph(args.pysph, per_width, args.threads)),
-              flush=True)  # fmt: skip
+        if not args.no_mps:
+            print(describe(f"jellysim MPS, {per_width}", run_mps(per_width)), flush=True)
+        for scheme in args.scheme or ["wcsph"]:
+            run = run_pysph(args.pysph, per_width, args.threads, scheme)
+            print(describe(f"PySPH {scheme.upper()}, {per_width}", run), flush=True)
 
 
 if __name__ == "__main__":
