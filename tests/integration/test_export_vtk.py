@@ -12,6 +12,7 @@ import h5py
 import meshio
 import numpy as np
 import pytest
+import scenes
 
 import jellysim
 from jellysim.export import export
@@ -48,19 +49,7 @@ def test_tentacles_and_bell_round_trip(brown: jellysim.Result, tmp_path: Path) -
 
 
 # A small soft bell in its tank (issue 6's test scale): three frames.
-SMALL_MOON = {
-    "duration": 0.2,
-    "fps": 10.0,
-    "tentacles.count": 2,
-    "fluid.spacing": 0.25,
-    "bell.height": 1.25,
-    "bell.thickness": 0.4,
-    "bell.margin_height": 1.0,
-    "fluid.tank_width": 5.5,
-    "fluid.tank_depth": 5.5,
-    "fluid.tank_height": 4.5,
-    "fluid.water_height": 3.75,
-}
+SMALL_MOON = {**scenes.SMALL_MOON, "duration": 0.2, "fps": 10.0, "tentacles.count": 2}
 
 
 def test_mass_spring_bell_round_trip(tmp_path: Path) -> None:

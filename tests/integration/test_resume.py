@@ -13,6 +13,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import scenes
 
 import jellysim
 
@@ -196,14 +197,7 @@ SOFT = [
     f"fps={SOFT_FPS}",
     "tentacles.count=2",
     "solver.checkpoint_every=4",
-    "fluid.spacing=0.25",
-    "bell.height=1.25",
-    "bell.thickness=0.4",
-    "bell.margin_height=1.0",
-    "fluid.tank_width=5.5",
-    "fluid.tank_depth=5.5",
-    "fluid.tank_height=4.5",
-    "fluid.water_height=3.75",
+    *(f"{key}={value}" for key, value in scenes.SMALL_MOON.items()),
 ]
 
 

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import scenes
 
 import jellysim
 from jellysim.bell.soft import CIRCUMFERENTIAL, SPRING_SAFETY, SoftBell
@@ -15,17 +16,7 @@ from jellysim.fluid.geometry import FLUID
 from jellysim.simulation.fluid import fluid_particles
 
 # A bell 8 l0 wide and 5 l0 tall in a 22 x 22 x 15 l0 tank: resolved, yet small.
-SMALL = {
-    "fluid.spacing": 0.25,
-    "bell.radius": 2.0,
-    "bell.height": 1.25,
-    "bell.thickness": 0.4,
-    "bell.margin_height": 1.0,
-    "fluid.tank_width": 5.5,
-    "fluid.tank_depth": 5.5,
-    "fluid.tank_height": 4.5,
-    "fluid.water_height": 3.75,
-}
+SMALL = {**scenes.SMALL_MOON, "bell.radius": 2.0}
 
 
 @pytest.fixture(scope="module")

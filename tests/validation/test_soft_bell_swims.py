@@ -16,25 +16,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scenes
 
 import jellysim
 from jellysim.bell.swimming import phase_lag, swim_cycles
 
 PERIOD = 2.0
 COARSE = {
+    **scenes.SMALL_MOON,
     "duration": 3 * PERIOD,
     "fps": 10.0,
     "tentacles.count": 2,
-    "fluid.spacing": 0.25,
-    "bell.height": 1.25,
-    "bell.thickness": 0.4,
-    "bell.margin_height": 1.0,
     "bell.spring_stiffness": 31.25,
     "bell.period": PERIOD,
-    "fluid.tank_width": 5.5,
-    "fluid.tank_depth": 5.5,
-    "fluid.tank_height": 4.5,
-    "fluid.water_height": 3.75,
 }
 # The muscle off: no contraction and no stiffening.
 OFF = {**COARSE, "bell.muscle_ratio": 0.0, "bell.muscle_stiffening": 1.0}

@@ -271,12 +271,8 @@ def neighbour_list(
     # The rows to fill, compacted: the parallel loops split their iterations evenly between
     # the threads, and rows are not spread evenly over the particles (water first, then the
     # tank's walls mixed with its row-less dummies).
-    active = np.empty(n, dtype=np.int64)
-    n_active = 0
-    for i in range(n):
-        if cell_of[i] >= 0 and rows[i]:
-            active[n_active] = i
-            n_active += 1
+    active = np.flatnonzero((cell_of >= 0) & rows)
+    n_active = active.shape[0]
     row_count = np.zeros(n + 1, dtype=np.int64)
     for a in prange(n_active):  # first pass: count each row
         i = active[a]
@@ -304,13 +300,7 @@ def _fluid_rows(kind: np.ndarray, alive: np.ndarray) -> np.ndarray:
     """Indices of the live fluid particles. The particle models loop over these rather than
     over all particles: parallel loops split their iterations evenly between the threads, and
     the fluid particles are not spread evenly (water first, then the tank)."""
-    active = np.empty(kind.shape[0], dtype=np.int64)
-    count = 0
-    for i in range(kind.shape[0]):
-        if alive[i] and kind[i] == FLUID:
-            active[count] = i
-            count += 1
-    return active[:count]
+    return np.flatnonzero(alive & (kind == FLUID))
 
 
 @njit(cache=True, parallel=True, fastmath=FAST)
@@ -321,16 +311,11 @@ def number_density(
     of every kind (dummies included) into ``out`` (0 for particles without a neighbour-list row);
     ``count`` receives the number of neighbours
     closer than r_e (for neighbour-count surface detection)."""
-    n = alive.shape[0]
-    active = np.empty(n, dtype=np.int64)  # live rows, compacted (see _fluid_rows)
-    n_active = 0
-    for i in range(n):
-        out[i] = 0.0
-        count[i] = 0
-        if alive[i] and neighbours.start[i + 1] > neighbours.start[i]:
-            active[n_active] = i
-            n_active += 1
-    for a in prange(n_active):
+    out[:] = 0.0
+    count[:] = 0
+    # live particles with a row, compacted (see _fluid_rows)
+    active = np.flatnonzero(alive & (neighbours.start[1:] > neighbours.start[:-1]))
+    for a in prange(active.shape[0]):
         i = active[a]
         total = 0.0
         found = 0
