@@ -208,6 +208,85 @@ def test_spring_time_step_is_the_explicit_limit(bell: SoftBell) -> None:
     assert bell.stable_dt() == bell.stable_dt(1.0)
 
 
+def _stretched(bell: SoftBell, factor: float = 1.01) -> np.ndarray:
+    """The rest shape scaled about its centre (every spring stretched by ``factor``) with a
+    small jitter that leaves them stretched."""
+    rng = np.random.default_rng(5)
+    centre = bell.rest.mean(axis=0)
+    jitter = 1e-3 * bell.l0 * rng.standard_normal(bell.rest.shape)
+    return centre + factor * (bell.rest - centre) + jitter
+
+
+def test_implicit_springs_solve_the_backward_euler_system(bell: SoftBell) -> None:
+    """Linearised backward Euler [Baraff & Witkin 1998]: ``(m I - dt^2 K) dv = dt (F + dt K v)``
+    with K = dF/dr; checked against a dense solve with K by central differences of the spring
+    forces (all springs stretched, where K is the exact derivative)."""
+    positions = _stretched(bell)
+    rng = np.random.default_rng(6)
+    velocities = 0.1 * rng.standard_normal(bell.rest.shape)
+    time, dt = 0.3, 0.2  # the muscle half contracted, a step over 10x its explicit limit
+    assert dt > 10 * bell.stable_dt()
+    force = np.empty_like(positions)
+    bell.implicit_force(positions, velocities, time, dt, force)
+
+    n = positions.size
+    explicit = np.empty_like(positions)
+    bell.spring_forces(positions, time + dt, explicit)
+    jacobian = np.empty((n, n))
+    h = 1e-6 * bell.l0
+    plus, minus = np.empty_like(positions), np.empty_like(positions)
+    for c in range(n):
+        shifted = positions.copy().reshape(-1)
+        shifted[c] += h
+        bell.spring_forces(shifted.reshape(positions.shape), time + dt, plus)
+        shifted[c] -= 2 * h
+        bell.spring_forces(shifted.reshape(positions.shape), time + dt, minus)
+        jacobian[:, c] = (plus - minus).reshape(-1) / (2 * h)
+    system = bell.mass * np.eye(n) - dt**2 * jacobian
+    rhs = dt * (explicit.reshape(-1) + dt * jacobian @ velocities.ravel())
+    change = np.linalg.solve(system, rhs)
+    expected = bell.mass * change.reshape(positions.shape) / dt
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(force, expected, atol=1e-6 * scale)
+    # Internal forces: the implicit force has no net part either.
+    np.testing.assert_allclose(force.sum(axis=0), 0.0, atol=1e-9 * scale)
+    # A short step gives the explicit force back.
+    bell.implicit_force(positions, velocities, time, 1e-7, force)
+    bell.spring_forces(positions, time + 1e-7, explicit)
+    np.testing.assert_allclose(force, explicit, atol=1e-4 * np.abs(explicit).max())
+
+
+@pytest.mark.parametrize("implicit", [True, False])
+def test_implicit_springs_stay_bounded_far_past_the_explicit_limit(
+    bell: SoftBell, implicit: bool
+) -> None:
+    """The bell, released stretched by 5 % with the muscle fully contracted, stepped at 10x the
+    explicit limit for 200 steps: implicit springs stay bounded and lose energy; the explicit
+    force at that step blows up (which is why explicit runs keep dt under the limit)."""
+    dt = 10 * bell.stable_dt()
+    time = bell.period * bell.jet_fraction  # full contraction
+    assert bell.activation(time) == pytest.approx(1.0)
+    positions = _stretched(bell, 1.05)
+    velocities = np.zeros_like(positions)
+    force = np.empty_like(positions)
+    largest = 0.0
+    for _ in range(200):
+        if implicit:
+            bell.implicit_force(positions, velocities, time - dt, dt, force)
+        else:
+            bell.spring_forces(positions, time, force)
+        velocities += dt * force / bell.mass
+        positions += dt * velocities
+        largest = max(largest, float(np.abs(positions - bell.rest).max()))
+        if not np.isfinite(largest) or largest > 100 * bell.radius:
+            break
+    if implicit:
+        assert largest < bell.radius
+        assert np.abs(velocities).max() < 0.5  # m/s: damped, not ringing up
+    else:
+        assert largest > 100 * bell.radius or not np.isfinite(largest)
+
+
 def test_phase_lag_recovers_a_known_lag() -> None:
     """A speed that follows the contraction by 0.6 s, over a drift and a start-up pulse."""
     period, lag = 2.0, 0.6

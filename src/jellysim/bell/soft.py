@@ -48,12 +48,14 @@ from jellysim.bell.kinematic import (
     waveform_peaks,
 )
 from jellysim.config.schema import Scene
+from jellysim.errors import SimulationUnstable
 from jellysim.fluid.geometry import water_block
 from jellysim.io.result import Dataset
 
 MARGIN_SMOOTHING = 1.5  # l0: standard deviation of the Gaussian along the margin arc
 SKIN_RADIUS = 2.5  # l0: particles that move a surface vertex
 CIRCUMFERENTIAL = math.cos(math.radians(45.0))  # muscle springs: |e . e_theta| at least this
+IMPLICIT_TOLERANCE = 1e-10  # relative residual of the implicit springs' CG
 SPRING_SAFETY = 0.4  # of the explicit stability limit 2 / omega_max
 
 
@@ -123,6 +125,7 @@ class SoftBell(RootDriver):
         self.stiffness = b.spring_stiffness
         self.muscle_ratio, self.muscle_stiffening = b.muscle_ratio, b.muscle_stiffening
         self.mass = scene.water.density * l0**3
+        self.integration = b.spring_integration
         self.frame_dt = 1.0 / scene.fps
         self.tentacles = scene.tentacles.count
 
@@ -277,6 +280,36 @@ class SoftBell(RootDriver):
         )
         s = self.springs
         kernels.gather_forces(self._tensions, s.start, s.edges, s.signs, out)
+
+    def implicit_force(
+        self,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        time: float,
+        dt: float,
+        out: np.ndarray,
+    ) -> int:
+        """The springs' force (B, 3) N over a step ``dt`` (s) from ``time`` by linearised
+        backward Euler [Baraff & Witkin 1998], into ``out``: ``m dv / dt`` with dv solving
+        ``(m I - dt^2 K) dv = dt (F + dt K v)``, F and K = dF/dr at ``positions`` with the muscle
+        at ``time + dt``. Fed to the explicit stage in place of F, it gives the bell particles
+        the backward-Euler velocity change, stable for any dt (docs/theory/soft-bell.md §4).
+        Returns the CG iterations."""
+        self.spring_forces(positions, time + dt, out)
+        s = self.springs
+        change = np.empty_like(out)
+        iterations, residual = kernels.implicit_velocity_change(
+            positions, velocities, s.pairs, self._rest_length, self._stiffness,
+            s.start, s.edges, s.signs, out, self.mass, dt, IMPLICIT_TOLERANCE, 1000, change,
+        )  # fmt: skip
+        if not residual <= IMPLICIT_TOLERANCE:
+            raise SimulationUnstable(
+                f"the implicit spring solve stopped at relative residual {residual:.3g} after "
+                f"{iterations} iterations at t = {time:.6g} s",
+                time=time,
+            )
+        out[:] = self.mass * change / dt
+        return int(iterations)
 
     def stable_dt(self, activation: float = 1.0) -> float:
         """The explicit stage's limit for the springs (s) with the muscle at ``activation`` (the

@@ -188,6 +188,15 @@ class Bell:
         le=1.0e4,
         doc="mass-spring: factor on the muscle springs' constant at full contraction",
     )
+    spring_integration: str = param(
+        "explicit",
+        kind="choice",
+        choices=("explicit", "implicit"),
+        doc="mass-spring: springs in MPS's explicit stage as the force now ('explicit', the "
+        "paper; the step is held under the springs' stability limit) or by linearised "
+        "backward Euler ('implicit', Baraff & Witkin 1998; the fluid's limits alone set the "
+        "step)",
+    )
     muscle_band: float = param(
         0.3,
         gt=0.0,
