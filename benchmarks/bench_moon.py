@@ -7,9 +7,11 @@ tentacles) is simulated for ``--seconds`` of simulated time after the kernels ar
 loaded from the cache (not timed), and the wall time of every phase is reported per MPS step:
 the fluid's phases (neighbours, explicit, PPE assembly, solve, correction), the springs, the
 tentacles and the rest (margin records, bookkeeping). ``--seconds`` equal to three periods
-measures the whole target; a shorter run projects it: dt is the springs' fixed limit
-(``bell_spring_dt``) as long as the fluid's Courant limit is longer, so the steps of three pulses
-are known exactly, and the projection is steps x the measured cost of a step (stated as such).
+measures the whole target. With explicit springs (``--set bell.spring_integration=explicit``) a
+shorter run projects it: dt is the springs' fixed limit (``bell_spring_dt``) as long as the
+fluid's Courant limit is longer, so the steps of three pulses are known exactly, and the
+projection is steps x the measured cost of a step (stated as such). The preset's implicit springs
+leave dt to the fluid's Courant limit, which follows the flow: only the whole run counts.
 Results are not written to disk.
 """
 
