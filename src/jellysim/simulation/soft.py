@@ -80,7 +80,8 @@ class SoftBellSimulation:
         text = (
             f"mass-spring bell of {len(self.bell.rest)} particles and "
             f"{len(self.bell.springs.pairs)} springs ({int(self.bell.springs.muscle.sum())} "
-            f"muscle) in MPS 3-D water of {water} particles, l0 = {s.fluid.spacing:g} m"
+            f"muscle, {self.bell.integration} integration) in MPS 3-D water of {water} "
+            f"particles, l0 = {s.fluid.spacing:g} m"
         )
         if self.tentacles is not None:
             text += f"; {self.tentacles.describe()}"
