@@ -308,12 +308,16 @@ def test_ctrl_c_stops_the_server_with_exit_0(brown: jellysim.Result) -> None:
     env = {k: v for k, v in os.environ.items() if k != "JELLYSIM_DEBUG"}
     source = str(Path(jellysim.__file__).parents[1])  # this checkout's src/, as imported here
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [source, env.get("PYTHONPATH")]))
+    # A shell without job control starts background jobs with SIGINT ignored, and Python then
+    # installs no KeyboardInterrupt handler: give the server the terminal's default, as Ctrl-C
+    # at a prompt would find it.
     process = subprocess.Popen(
         [sys.executable, "-m", "jellysim", "view", str(brown.folder), "--no-browser"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         assert process.stdout is not None
