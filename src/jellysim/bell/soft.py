@@ -311,6 +311,22 @@ class SoftBell(RootDriver):
         out[:] = self.mass * change / dt
         return int(iterations)
 
+    def step_force(
+        self,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        time: float,
+        dt: float,
+        out: np.ndarray,
+    ) -> None:
+        """The springs' force (B, 3) N for an MPS step of ``dt`` (s) from ``time``, into ``out``:
+        :meth:`spring_forces` now (``spring_integration = "explicit"``) or
+        :meth:`implicit_force`."""
+        if self.integration == "explicit":
+            self.spring_forces(positions, time, out)
+        else:
+            self.implicit_force(positions, velocities, time, dt, out)
+
     def stable_dt(self, activation: float = 1.0) -> float:
         """The explicit stage's limit for the springs (s) with the muscle at ``activation`` (the
         run uses full stiffening throughout): ``SPRING_SAFETY x 2 / omega``, ``omega^2 = max_i 4

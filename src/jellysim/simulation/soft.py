@@ -91,12 +91,10 @@ class SoftBellSimulation:
         """Compile the kernels (or load them from the cache) on throw-away copies."""
         probe = MPSSolver(self.solver.params, self.solver.position.copy(), self.solver.kind)
         probe.restore(self.solver.state_arrays())
-        self.bell.spring_forces(probe.position[self.bell_rows], 0.0, self._bell_force.copy())
-        if self.bell.integration == "implicit":
-            rows = self.bell_rows
-            self.bell.implicit_force(
-                probe.position[rows], probe.velocity[rows], 0.0, 1e-3, self._bell_force.copy()
-            )
+        rows = self.bell_rows
+        self.bell.step_force(
+            probe.position[rows], probe.velocity[rows], 0.0, 1e-3, self._bell_force.copy()
+        )
         probe.step(min(probe.stable_dt(), 1e-6), self._force)
         if self.tentacles is not None:
             self.tentacles.prepare()
@@ -111,13 +109,9 @@ class SoftBellSimulation:
         volume = self.l0**3
         while solver.time < end - 1e-12 * self.frame_dt:
             dt = substep(end - solver.time, min(solver.stable_dt(), self.spring_dt))
-            if bell.integration == "explicit":
-                bell.spring_forces(solver.position[rows], solver.time, self._bell_force)
-            else:
-                bell.implicit_force(
-                    solver.position[rows], solver.velocity[rows], solver.time, dt,
-                    self._bell_force,
-                )  # fmt: skip
+            bell.step_force(
+                solver.position[rows], solver.velocity[rows], solver.time, dt, self._bell_force
+            )
             self._force[rows] = self._bell_force / volume  # force density, N/m3
             try:
                 stats = solver.step(dt, self._force)
