@@ -1,10 +1,11 @@
 """MPS speed: steps per second and the time per phase at about 57,000 fluid particles.
 
-    .venv/bin/python benchmarks/bench_fluid.py [--steps 20] [--threads N]
+    .venv/bin/python benchmarks/bench_fluid.py [--steps 20] [--threads N] [--solver NAME]
 
 The dam break of dam-break-2d at a / l0 = 170 (57,800 fluid particles) and the 3-D tank of
 tank-3d at a / l0 = 30 (54,000 fluid particles), each from rest, at the presets' defaults
-(r_e 2.1 / 4.0 l0 in 2-D, 2.1 / 3.1 l0 in 3-D; ICCG to a relative residual of 1e-8; Courant 0.2).
+(r_e 2.1 / 4.0 l0 in 2-D, 2.1 / 3.1 l0 in 3-D; the pressure solver to a relative residual of
+1e-8: the preset's, or ``--solver`` (iccg, cg, deflated) for every case; Courant 0.2).
 One step is taken first (JIT compilation or cache load, not timed); then ``--steps`` steps at the
 solver's stable dt are timed. Walls and dummy particles are not counted.
 """
@@ -34,6 +35,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--threads", type=int, default=numba.config.NUMBA_NUM_THREADS)
     parser.add_argument("--case", choices=tuple(CASES), action="append")
+    parser.add_argument("--solver", choices=("iccg", "cg", "deflated"))
     args = parser.parse_args()
     numba.set_num_threads(args.threads)
     print(
@@ -41,7 +43,10 @@ def main() -> None:
         f"threads {numba.get_num_threads()}"
     )
     for name in args.case or list(CASES):
-        scene = jellysim.load_scene(name, CASES[name])
+        overrides: dict[str, object] = dict(CASES[name])
+        if args.solver:
+            overrides["fluid.solver"] = args.solver
+        scene = jellysim.load_scene(name, overrides)
         simulation = FluidSimulation(scene)
         solver = simulation.solver
         fluid = int(np.sum(solver.kind == FLUID))
@@ -58,7 +63,8 @@ def main() -> None:
         phases = ", ".join(f"{k} {1000 * v / args.steps:.0f} ms" for k, v in seconds.items())
         print(
             f"{name}: {fluid} fluid + {len(solver.kind) - fluid} wall/dummy particles; "
-            f"{args.steps / wall:.2f} steps/s; ICCG iterations {np.mean(iterations):.0f} "
+            f"{args.steps / wall:.2f} steps/s; {scene.fluid.solver} iterations "
+            f"{np.mean(iterations):.0f} "
             f"(mean); per step: {phases}"
         )
 

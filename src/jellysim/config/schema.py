@@ -284,8 +284,16 @@ class Fluid:
     solver: str = param(
         "iccg",
         kind="choice",
-        choices=("iccg", "cg"),
-        doc="pressure solver: incomplete-Cholesky preconditioned CG, or plain CG",
+        choices=("iccg", "cg", "deflated"),
+        doc="pressure solver: incomplete-Cholesky preconditioned CG, plain CG, or CG with "
+        "Jacobi and a coarse problem on aggregates of particles (two-level deflation, Tang et "
+        "al. 2009; docs/fluid.md)",
+    )
+    coarse_cell: float = param(
+        4.0,
+        ge=2.0,
+        le=16.0,
+        doc="edge of the deflated solver's aggregates, in particle spacings",
     )
     tolerance: float = param(
         1.0e-8, gt=0.0, lt=1.0, doc="relative residual at which the pressure solve stops"

@@ -26,11 +26,12 @@ import numpy as np
 
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid import kernels
+from jellysim.fluid.deflation import deflated_cg
 from jellysim.fluid.geometry import DUMMY, FLUID, WALL
 
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count")
-SOLVERS = ("iccg", "cg")
+SOLVERS = ("iccg", "cg", "deflated")
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
 # PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
@@ -66,8 +67,10 @@ class MPSParameters:
       fewer than ``surface_neighbour_threshold`` N0 neighbours lie within r_e (N0 the lattice
       count) [Tanaka & Masunaga 2010]. Not yet sound: in the 2-D hydrostatic tank it lets a
       surface particle be kicked to ~7 m/s after 0.14 s; use "standard".
-    - ``solver``: "iccg" (IC(0)-preconditioned CG) or "cg" (plain CG, for comparison);
-      ``tolerance`` is the relative residual ``|b - A p| / |b|``.
+    - ``solver``: "iccg" (IC(0)-preconditioned CG), "cg" (plain CG, for comparison) or
+      "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
+      :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
+      ``|b - A p| / |b|``.
     - ``compressibility`` alpha (1/Pa): adds ``(rho alpha / dt^2) p`` to the PPE's left side, the
       fluid's slight compressibility [Ikeda et al. 2001]. It keeps the matrix non-singular when no
       particle is on the free surface; water's 0.45e-9 1/Pa makes it a regulariser only.
@@ -93,6 +96,7 @@ class MPSParameters:
     mixed_relaxation: float = 0.01
     surface: str = "standard"
     solver: str = "iccg"
+    coarse_cell: float = 4.0
     tolerance: float = 1e-8
     max_iterations: int = 2000
     courant: float = 0.2
@@ -341,11 +345,12 @@ class MPSSolver:
         stats.surface = system.surface
         matrix, rhs, particles = system.matrix, system.rhs, system.particles
 
-        # Solve by ICCG (or CG), warm-started from the previous pressure, Eq. (F11)-(F12)
+        # Solve by ICCG, CG or deflated CG, warm-started from the last pressure, Eq. (F11)-(F12)
         solution = self.pressure[particles]
         try:
+            coarse = CoarseSpace(self.position[particles], self.domain_min, p.coarse_cell * p.l0)
             iterations, residual, stats.ic_shift = solve(
-                matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations
+                matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations, coarse
             )
         except FluidDiverged as error:
             raise FluidDiverged(
@@ -487,6 +492,15 @@ def substep(remaining: float, limit: float) -> float:
     return remaining / math.ceil(remaining / limit)
 
 
+class CoarseSpace(NamedTuple):
+    """Where the rows of a PPE are, for the deflated solver's aggregates: ``position`` (n, D) m
+    in row order, the aggregates' lattice ``origin`` (D,) m and cell ``size`` m."""
+
+    position: np.ndarray
+    origin: np.ndarray
+    size: float
+
+
 def solve(
     matrix: kernels.Matrix,
     rhs: np.ndarray,
@@ -494,12 +508,21 @@ def solve(
     method: str = "iccg",
     tolerance: float = 1e-8,
     max_iterations: int = 2000,
+    coarse: CoarseSpace | None = None,
 ) -> tuple[int, float, float]:
-    """Solve the PPE in place in ``solution`` (initial guess in, answer out) by ICCG or CG.
+    """Solve the PPE in place in ``solution`` (initial guess in, answer out) by ICCG, CG or
+    deflated CG (``coarse`` required).
 
     IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a pivot is
-    not positive. Returns (iterations, relative residual, shift used).
+    not positive. Returns (iterations, relative residual, IC shift used).
     """
+    if method == "deflated":
+        if coarse is None:
+            raise ValueError("the deflated solver needs the rows' positions (coarse)")
+        iterations, residual = deflated_cg(
+            matrix, *coarse, rhs, solution, tolerance, max_iterations
+        )
+        return iterations, residual, 0.0
     shift = 0.0
     compact = kernels.no_factor()
     if method == "iccg":
@@ -525,6 +548,7 @@ __all__ = [
     "DUMMY",
     "FLUID",
     "WALL",
+    "CoarseSpace",
     "FluidDiverged",
     "LatticeReference",
     "MPSParameters",

@@ -58,6 +58,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         surface=f.surface,
         surface_threshold=f.surface_threshold,
         solver=f.solver,
+        coarse_cell=f.coarse_cell,
         tolerance=f.tolerance,
         courant=f.courant,
     )
