@@ -100,7 +100,8 @@ def test_deflated_cg_needs_far_fewer_iterations_than_cg(released) -> None:
 
 
 def test_coarse_operator_is_z_transpose_a_z(released) -> None:
-    """The compiled E = Z^T A Z equals the product of sparse matrices (slow reference); every
+    """The compiled W = Z^T A and E = Z^T A Z equal products of sparse matrices (slow
+    reference); every
     row lies in one aggregate, each aggregate holds a row, and the cells are 4 l0 wide."""
     matrix, _, coarse = released
     key, m = deflation.aggregates(coarse.position, coarse.origin, coarse.size)
@@ -110,8 +111,12 @@ def test_coarse_operator_is_z_transpose_a_z(released) -> None:
         members = coarse.position[key == a]
         assert np.all(np.ptp(members, axis=0) < coarse.size)
     z = sp.csr_matrix((np.ones(n), (np.arange(n), key)), shape=(n, m))
+    restriction = deflation.restricted_operator(matrix, key, m)
+    w = sp.csr_matrix((restriction.data, restriction.indices, restriction.indptr), shape=(m, n))
+    w_reference = (z.T @ to_scipy(matrix)).toarray()
+    np.testing.assert_allclose(w.toarray(), w_reference, rtol=1e-12, atol=0)
     reference = (z.T @ to_scipy(matrix) @ z).toarray()
-    fast = deflation.coarse_operator(matrix, key, m)
+    fast = deflation.coarse_operator(restriction, key, m)
     assert np.all(np.diff(fast.indptr) > 0)
     for a in range(m):
         row = fast.indices[fast.indptr[a] : fast.indptr[a + 1]]
