@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numba
 import numpy as np
 import pytest
@@ -124,6 +126,25 @@ def test_coarse_operator_is_z_transpose_a_z(released) -> None:
     np.testing.assert_allclose(
         fast.toarray(), reference, rtol=1e-12, atol=1e-12 * abs(reference).max()
     )
+
+
+def test_the_deflated_solvers_unsorted_matrix_is_the_same_matrix() -> None:
+    """Assembled for the deflated solver the rows keep neighbour order (diagonal first); as a
+    matrix it is the sorted one, entry for entry."""
+    dt = 5e-4
+    fluid = dam_break()
+    for _ in range(5):
+        fluid.step(dt)
+    systems = [fluid.poisson_system(dt)]
+    fluid.params = dataclasses.replace(fluid.params, solver="deflated")
+    systems.append(fluid.poisson_system(dt))
+    ordered, unordered = systems[0].matrix, systems[1].matrix
+    np.testing.assert_array_equal(systems[0].particles, systems[1].particles)
+    rows = np.arange(unordered.indptr.size - 1)
+    assert np.array_equal(unordered.indices[unordered.diagonal], rows)
+    assert np.array_equal(unordered.diagonal, unordered.indptr[:-1])
+    assert abs(to_scipy(ordered) - to_scipy(unordered)).max() == 0.0
+    np.testing.assert_array_equal(systems[0].rhs, systems[1].rhs)
 
 
 def test_deflated_solve_is_the_same_with_one_and_two_threads(released) -> None:

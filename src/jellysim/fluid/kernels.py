@@ -53,8 +53,9 @@ class Neighbours(NamedTuple):
 
 
 class Matrix(NamedTuple):
-    """Square sparse matrix in CSR with sorted column indices; ``diagonal[i]`` is the position
-    of entry (i, i) in ``data``. ``blocks`` = (b0, b1): rows ``[0, b0)`` and ``[b0, b1)`` are
+    """Square sparse matrix in CSR with sorted column indices (or, assembled for the deflated
+    solver, unsorted: the diagonal first); ``diagonal[i]`` is the position of entry (i, i) in
+    ``data``. ``blocks`` = (b0, b1): rows ``[0, b0)`` and ``[b0, b1)`` are
     two uncoupled blocks (no entry joins them), rows from b1 on the separator coupled to both;
     the IC(0) factor and its triangular solves treat the two blocks in parallel. (n, n): one
     block."""
@@ -541,6 +542,7 @@ def assemble_poisson(
     n_rows: int,
     constants: Constants,
     diagonal_shift: float,
+    sort_columns: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Matrix of the pressure Poisson equation, Eq. (F8), over the unknown particles (live fluid
     and wall particles not on the free surface; ``row_of`` numbers them).
@@ -550,7 +552,9 @@ def assemble_poisson(
     diagonal ``sum_j a_ij`` over live fluid and wall neighbours (free-surface neighbours, p_j = 0,
     enter only here) plus ``diagonal_shift`` = c (the compressibility term, 1/m2). Symmetric,
     weakly diagonally dominant, positive definite when c > 0 or a Dirichlet neighbour is reached.
-    Returns (indptr, indices, data, diagonal) of :class:`Matrix`, columns sorted per row.
+    Returns (indptr, indices, data, diagonal) of :class:`Matrix`, columns sorted per row; with
+    ``sort_columns`` False each row is the diagonal followed by the neighbours in neighbour-list
+    order (for solvers that need no order: the serial sort is skipped).
     """
     n = kind.shape[0]
     re = constants.re_laplacian
@@ -590,6 +594,8 @@ def assemble_poisson(
                 unsorted_data[end] = -a
                 end += 1
         unsorted_data[start] = total + diagonal_shift
+    if not sort_columns:
+        return indptr, unsorted_indices, unsorted_data, indptr[:-1].copy()
     # Sorted columns by transposition: A is symmetric to the last bit (r_ij and r_ji are the
     # same floating-point numbers), and sweeping the rows in order appends to each transposed
     # row its columns in increasing order.

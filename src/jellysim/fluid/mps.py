@@ -424,8 +424,11 @@ class MPSSolver:
         particles = np.empty(n_rows, dtype=np.int64)
         particles[self._row_of[unknown]] = np.flatnonzero(unknown)
         shift = p.density * p.compressibility / dt**2
+        ordered = p.solver != "deflated"  # the deflated solver needs no column order
         matrix = kernels.Matrix(
-            *kernels.assemble_poisson(nb, self.kind, self.alive, self._row_of, n_rows, c, shift),
+            *kernels.assemble_poisson(
+                nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered
+            ),
             blocks[:2].copy(),
         )
         rhs = self.poisson_source(dt, particles, nb)
