@@ -1,14 +1,16 @@
 """The 2-D dam break side by side: jellysim's MPS against PySPH 1.0b2's WCSPH (issue 5).
 
     .venv/bin/python benchmarks/bench_pysph.py [--per-width 40 ...] [--threads 2]
-        [--scheme wcsph ...] [--no-mps] [--pysph .venv-pysph/bin/python]
+        [--scheme wcsph ...] [--no-mps | --no-pysph] [--solver iccg|deflated]
+        [--pysph .venv-pysph/bin/python]
     # --pysph: the venv of benchmarks/pysph_env.sh
 
 Martin & Moyce's n^2 = 2 column (width a, height 2a) collapsing, at N particles across a, to
 T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after the other:
 
-- jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank) at fluid.spacing = a / N, stepped
-  by the solver at its own stable dt; the surge front recorded after every step.
+- jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank) at fluid.spacing = a / N (and the
+  pressure solver ``--solver``, the preset's ICCG by default), stepped by the solver at its own
+  stable dt; the surge front recorded after every step.
 - PySPH: its example dam_break_2d (a = 1 m, a 4a tank, WCSPH with its adaptive step) at
   dx = a / N, run in PySPH's own venv by benchmarks/pysph_dam_break.py; the front at 200
   outputs. Its block has N + 1 particles across (both ends included).
@@ -44,8 +46,11 @@ HERE = Path(__file__).resolve().parent
 UNTIL = 3.3
 
 
-def run_mps(per_width: int) -> dict[str, object]:
-    scene = jellysim.load_scene("dam-break-2d", {"fluid.spacing": 0.1 / per_width})
+def run_mps(per_width: int, solver_name: str | None = None) -> dict[str, object]:
+    overrides: dict[str, object] = {"fluid.spacing": 0.1 / per_width}
+    if solver_name:
+        overrides["fluid.solver"] = solver_name
+    scene = jellysim.load_scene("dam-break-2d", overrides)
     solver = FluidSimulation(scene).solver
     a = scene.fluid.water_width
     scale = math.sqrt(2 * 9.81 / a)
@@ -112,9 +117,11 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--scheme", action="append", help="PySPH scheme(s); default wcsph")
     parser.add_argument("--no-mps", action="store_true", help="run PySPH only")
+    parser.add_argument("--no-pysph", action="store_true", help="run jellysim only")
+    parser.add_argument("--solver", choices=("iccg", "cg", "deflated"), help="MPS PPE solver")
     parser.add_argument("--pysph", default=str(HERE.parent / ".venv-pysph" / "bin" / "python"))
     args = parser.parse_args()
-    if not Path(args.pysph).exists():
+    if not args.no_pysph and not Path(args.pysph).exists():
         sys.exit(f"no PySPH Python at {args.pysph}: build it with benchmarks/pysph_env.sh")
     numba.set_num_threads(args.threads)
     print(
@@ -126,8 +133,9 @@ def main() -> None:
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for per_width in args.per_width or [40]:
         if not args.no_mps:
-            print(describe(f"jellysim MPS, {per_width}", run_mps(per_width)), flush=True)
-        for scheme in args.scheme or ["wcsph"]:
+            name = f"jellysim MPS ({args.solver or 'iccg'}), {per_width}"
+            print(describe(name, run_mps(per_width, args.solver)), flush=True)
+        for scheme in [] if args.no_pysph else args.scheme or ["wcsph"]:
             run = run_pysph(args.pysph, per_width, args.threads, scheme)
             print(describe(f"PySPH {scheme.upper()}, {per_width}", run), flush=True)
 
