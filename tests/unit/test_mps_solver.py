@@ -101,6 +101,19 @@ def test_deflated_cg_needs_far_fewer_iterations_than_cg(released) -> None:
     assert counts["deflated"] < counts["iccg"]
 
 
+def test_a_singular_coarse_problem_is_a_diagnosed_divergence(released, monkeypatch) -> None:
+    """SuperLU's error on a singular E (A not definite) becomes the run's FluidDiverged (exit
+    status 3 with a diagnosis), not a traceback."""
+    matrix, rhs, coarse = released
+
+    def singular(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("Factor is exactly singular")
+
+    monkeypatch.setattr(spla, "splu", singular)
+    with pytest.raises(FluidDiverged, match="coarse problem could not be factored"):
+        solve(matrix, rhs, np.zeros_like(rhs), "deflated", 1e-8, 100, coarse)
+
+
 def test_coarse_operator_is_z_transpose_a_z(released) -> None:
     """The compiled W = Z^T A and E = Z^T A Z equal products of sparse matrices (slow
     reference); every
@@ -205,8 +218,9 @@ def test_ic0_breakdown_is_shifted() -> None:
     assert kernels.incomplete_cholesky(matrix, 0.1, factor)
 
 
-def test_non_convergence_raises_fluid_diverged() -> None:
-    solver = dam_break(max_iterations=2)
+@pytest.mark.parametrize("method", ["iccg", "deflated"])
+def test_non_convergence_raises_fluid_diverged(method: str) -> None:
+    solver = dam_break(max_iterations=2, solver=method)
     with pytest.raises(FluidDiverged) as caught:
         solver.step(5e-4)
     assert isinstance(caught.value, SimulationUnstable)

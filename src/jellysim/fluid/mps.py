@@ -522,9 +522,17 @@ def solve(
     if method == "deflated":
         if coarse is None:
             raise ValueError("the deflated solver needs the rows' positions (coarse)")
-        iterations, residual = deflated_cg(
-            matrix, *coarse, rhs, solution, tolerance, max_iterations
-        )
+        try:
+            iterations, residual = deflated_cg(
+                matrix, *coarse, rhs, solution, tolerance, max_iterations
+            )
+        except RuntimeError as error:  # SuperLU: a singular coarse matrix (A not definite)
+            raise FluidDiverged(
+                f"the deflated solver's coarse problem could not be factored ({error})",
+                time=math.nan,
+                iterations=0,
+                residual=math.inf,
+            ) from None
         return iterations, residual, 0.0
     shift = 0.0
     compact = kernels.no_factor()
