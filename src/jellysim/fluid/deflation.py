@@ -33,7 +33,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 from numba import njit, prange
 
-from jellysim.fluid.kernels import FAST, Matrix, multiply
+from jellysim.fluid.kernels import FAST, Matrix, dot, multiply
 
 
 def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[np.ndarray, int]:
@@ -189,14 +189,6 @@ def _prolong_add(key: np.ndarray, coarse: np.ndarray, y: np.ndarray, out: np.nda
 
 
 @njit(cache=True)
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    total = 0.0
-    for i in range(a.shape[0]):
-        total += a[i] * b[i]
-    return total
-
-
-@njit(cache=True)
 def _update(x: np.ndarray, r: np.ndarray, d: np.ndarray, q: np.ndarray, alpha: float) -> float:
     """``x += alpha d``, ``r -= alpha q``; returns |r|^2."""
     total = 0.0
@@ -252,7 +244,7 @@ def deflated_cg(
     :func:`jellysim.fluid.kernels.conjugate_gradient`. Returns (iterations, relative
     residual)."""
     n = b.shape[0]
-    norm_b = math.sqrt(_dot(b, b))
+    norm_b = math.sqrt(dot(b, b))
     if n == 0:
         return 0, 0.0
     if norm_b == 0.0:
@@ -268,12 +260,12 @@ def deflated_cg(
     z, y, q = np.empty(n), np.empty(n), np.empty(n)
     deflation.precondition(r, z, y)
     d = z.copy()
-    rz = _dot(r, z)
-    residual = math.sqrt(_dot(r, r)) / norm_b
+    rz = dot(r, z)
+    residual = math.sqrt(dot(r, r)) / norm_b
     iterations = 0
     while residual > tolerance and iterations < max_iterations:
         multiply(matrix, d, q)
-        curvature = _dot(d, q)
+        curvature = dot(d, q)
         if curvature == 0.0 or rz == 0.0:
             break  # the residual is exactly zero in exact arithmetic: nothing left to reduce
         residual = math.sqrt(_update(x, r, d, q, rz / curvature)) / norm_b
@@ -281,7 +273,7 @@ def deflated_cg(
         if not math.isfinite(residual):
             break
         deflation.precondition(r, z, y)
-        rz_new = _dot(r, z)
+        rz_new = dot(r, z)
         _direction(d, z, rz_new / rz)
         rz = rz_new
     return iterations, residual

@@ -769,7 +769,8 @@ def _precondition(blocks: np.ndarray, factor: Factor, r: np.ndarray, z: np.ndarr
 
 
 @njit(cache=True)
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a . b``, summed serially (the same result whatever the number of threads)."""
     total = 0.0
     for i in range(a.shape[0]):
         total += a[i] * b[i]
@@ -793,7 +794,7 @@ def conjugate_gradient(
     otherwise plain CG (``factor`` unused). Returns (iterations, relative residual).
     """
     n = b.shape[0]
-    norm_b = math.sqrt(_dot(b, b))
+    norm_b = math.sqrt(dot(b, b))
     if n == 0:
         return 0, 0.0
     if norm_b == 0.0:
@@ -810,12 +811,12 @@ def conjugate_gradient(
         z[:] = r
     d = z.copy()
     q = np.empty(n)
-    rz = _dot(r, z)
-    residual = math.sqrt(_dot(r, r)) / norm_b
+    rz = dot(r, z)
+    residual = math.sqrt(dot(r, r)) / norm_b
     iterations = 0
     while residual > tolerance and iterations < max_iterations:
         multiply(matrix, d, q)
-        curvature = _dot(d, q)
+        curvature = dot(d, q)
         if curvature == 0.0 or rz == 0.0:
             break  # the residual is exactly zero in exact arithmetic: nothing left to reduce
         alpha = rz / curvature
@@ -823,14 +824,14 @@ def conjugate_gradient(
             x[i] += alpha * d[i]
             r[i] -= alpha * q[i]
         iterations += 1
-        residual = math.sqrt(_dot(r, r)) / norm_b
+        residual = math.sqrt(dot(r, r)) / norm_b
         if not math.isfinite(residual):
             break
         if preconditioned:
             _precondition(matrix.blocks, factor, r, z)
         else:
             z[:] = r
-        rz_new = _dot(r, z)
+        rz_new = dot(r, z)
         beta = rz_new / rz
         rz = rz_new
         for i in range(n):
