@@ -45,6 +45,10 @@ def main() -> None:
     parser.add_argument("--case", choices=tuple(CASES), action="append")
     parser.add_argument("--solver", choices=("iccg", "cg", "deflated"))
     parser.add_argument("--compare-solvers", action="store_true")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE",
+        help="a scene override for every case, e.g. fluid.neighbour_skin=0.6",
+    )  # fmt: skip
     args = parser.parse_args()
     numba.set_num_threads(args.threads)
     print(
@@ -55,11 +59,15 @@ def main() -> None:
         overrides: dict[str, object] = dict(CASES[name])
         if args.solver:
             overrides["fluid.solver"] = args.solver
+        for item in args.set:
+            key, _, value = item.partition("=")
+            overrides[key] = float(value) if value.replace(".", "", 1).isdigit() else value
         scene = jellysim.load_scene(name, overrides)
         simulation = FluidSimulation(scene)
         solver = simulation.solver
         fluid = int(np.sum(solver.kind == FLUID))
         solver.step(solver.stable_dt())  # compile or load from the cache
+        searches, started = solver.searches, solver.time
         seconds: dict[str, float] = {}
         iterations = []
         start = time.perf_counter()
@@ -74,7 +82,9 @@ def main() -> None:
             f"{name}: {fluid} fluid + {len(solver.kind) - fluid} wall/dummy particles; "
             f"{args.steps / wall:.2f} steps/s; {scene.fluid.solver} iterations "
             f"{np.mean(iterations):.0f} "
-            f"(mean); per step: {phases}"
+            f"(mean); per step: {phases}; {solver.searches - searches} cell searches "
+            f"(neighbour_skin {scene.fluid.neighbour_skin:g} l0) over "
+            f"t = {started:.4f}-{solver.time:.4f} s"
         )
         if args.compare_solvers:
             compare_solvers(solver)

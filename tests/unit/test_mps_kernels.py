@@ -88,6 +88,55 @@ def test_cell_list_equals_brute_force(dim: int) -> None:
             assert got[j] == pytest.approx(r[i, j], rel=1e-12)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_verlet_list_cut_to_the_radius_equals_a_fresh_search(dim: int) -> None:
+    """A list of candidates searched with radius + skin, cut to the radius after every particle
+    moved by less than half the skin, holds exactly the pairs of a fresh search there, at the
+    same distances to the last bit (in the candidates' order)."""
+    rng = np.random.default_rng(11)
+    n = 500
+    position = rng.uniform(0.0, 1.0, (n, dim))
+    alive = rng.random(n) > 0.1
+    rows = rng.random(n) > 0.3
+    radius, skin = 0.12, 0.04
+    candidates = kernels.Neighbours(
+        *kernels.neighbour_list(position, alive, alive, radius + skin), radius + skin
+    )
+    step = rng.normal(size=(n, dim))
+    step *= rng.uniform(0.0, 0.5 * skin, (n, 1)) / np.linalg.norm(step, axis=1, keepdims=True)
+    moved = position + step
+    alive_now = alive & (rng.random(n) > 0.05)  # some die in between
+    assert kernels.largest_displacement(moved, position, alive_now) < 0.5 * skin
+    start, index, distance = kernels.filter_neighbours(
+        candidates, moved, alive_now, rows, radius, np.empty(0, np.int64), np.empty(0)
+    )
+    fresh = kernels.neighbour_list(moved, alive_now, rows, radius)
+    assert np.array_equal(start, fresh[0])
+    for i in range(n):
+        row = slice(start[i], start[i + 1])
+        got = dict(zip(index[row].tolist(), distance[row].tolist(), strict=True))
+        want = dict(zip(fresh[1][row].tolist(), fresh[2][row].tolist(), strict=True))
+        assert got == want
+
+
+def test_search_writes_into_a_buffer_that_holds_the_list_and_grows_one_that_does_not() -> None:
+    rng = np.random.default_rng(5)
+    position = rng.uniform(0.0, 1.0, (300, 3))
+    alive = np.ones(300, dtype=np.bool_)
+    exact = kernels.neighbour_list(position, alive, alive, 0.2)
+    total = int(exact[0][-1])
+    for size in (total + 100, total // 2):
+        index_buffer, distance_buffer = np.full(size, -7, np.int64), np.zeros(size)
+        start, index, distance = kernels.search_neighbours(
+            position, alive, alive, 0.2, index_buffer, distance_buffer
+        )
+        assert np.array_equal(start, exact[0])
+        assert np.array_equal(index[:total], exact[1])
+        assert np.array_equal(distance[:total], exact[2])
+        assert np.shares_memory(index, index_buffer) == (size >= total)
+        assert index.size >= total
+
+
 def blob(dim: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A free, jittered fluid block (no walls) with random velocities."""
     l0 = 0.01

@@ -295,6 +295,14 @@ class Fluid:
         le=16.0,
         doc="edge of the deflated solver's aggregates, in particle spacings",
     )
+    neighbour_skin: float = param(
+        0.0,
+        ge=0.0,
+        le=2.0,
+        doc="Verlet skin of the neighbour lists, in particle spacings: 0 searches the cells "
+        "twice a step; above 0 one wider search serves until a particle has moved half the "
+        "skin (faster; other round-off)",
+    )
     tolerance: float = param(
         1.0e-8, gt=0.0, lt=1.0, doc="relative residual at which the pressure solve stops"
     )

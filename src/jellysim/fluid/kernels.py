@@ -103,6 +103,19 @@ def weight(r: float, re: float) -> float:
 CELLS_PER_RADIUS = 2
 
 
+@njit(cache=True)
+def _room(buffer: np.ndarray, size: int) -> np.ndarray:
+    """``buffer`` if it holds ``size`` entries, else a new one a quarter larger than that.
+
+    The large arrays of a step (neighbour lists, the PPE matrix) are written into buffers the
+    solver keeps from step to step: a fresh array of tens of megabytes is mapped anew by the
+    allocator each time, and touching its pages for the first time cost more than filling
+    them (tank-3d at 54,000: 1.1 steps/s with fresh arrays, docs/performance.md)."""
+    if buffer.shape[0] >= size:
+        return buffer
+    return np.empty(size + size // 4, dtype=buffer.dtype)
+
+
 class _Grid(NamedTuple):
     """The cell list of :func:`neighbour_list`, always three axes (a 2-D grid has one cell
     along z and zero z coordinates, so that the 2-D search is the 3-D one with its loops over z
@@ -236,8 +249,13 @@ def _scan_cells(
 
 
 @njit(cache=True, parallel=True)
-def neighbour_list(
-    position: np.ndarray, alive: np.ndarray, rows: np.ndarray, radius: float
+def search_neighbours(
+    position: np.ndarray,
+    alive: np.ndarray,
+    rows: np.ndarray,
+    radius: float,
+    index: np.ndarray,
+    distance: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cell-list search: for every live particle i with ``rows[i]`` ((N,) bool), all live
     particles closer than ``radius`` (m); other rows are empty (such particles still appear as
@@ -246,8 +264,9 @@ def neighbour_list(
     Cells of side ``radius / CELLS_PER_RADIUS`` (:func:`_grid`); particle i scans the cells
     within ``CELLS_PER_RADIUS`` of its own along each axis, once to count and once to fill.
     Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
-    within a row the order is fixed (cell order, then particle index). The arrays are allocated
-    here because their sizes depend on the configuration.
+    within a row the order is fixed (cell order, then particle index). ``indices`` and
+    ``distance`` are the buffers ``index`` ((K,) int64) and ``distance`` ((K,) float64) when
+    they hold the list, else new ones (:func:`_room`), and run past the list's end ``start[N]``.
     """
     n = position.shape[0]
     cell, shape, stride, start, member, member_position, coordinates = _grid(
@@ -270,8 +289,8 @@ def neighbour_list(
         )  # fmt: skip
     for i in range(n):
         row_count[i + 1] += row_count[i]
-    index = np.empty(row_count[n], dtype=np.int64)
-    distance = np.empty(row_count[n])
+    index = _room(index, int(row_count[n]))
+    distance = _room(distance, int(row_count[n]))
     for a in prange(n_active):  # second pass: fill each row
         i = active[a]
         _scan_cells(
@@ -279,6 +298,106 @@ def neighbour_list(
             index, distance, row_count[i],
         )  # fmt: skip
     return row_count, index, distance
+
+
+@njit(cache=True)
+def neighbour_list(
+    position: np.ndarray, alive: np.ndarray, rows: np.ndarray, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`search_neighbours` into arrays of the list's own length."""
+    start, index, distance = search_neighbours(
+        position, alive, rows, radius, np.empty(0, dtype=np.int64), np.empty(0)
+    )
+    return start, index[: start[-1]].copy(), distance[: start[-1]].copy()
+
+
+@njit(cache=True)
+def _filter_row(
+    i: int,
+    candidates: Neighbours,
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    alive: np.ndarray,
+    radius2: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+    slot: int,
+) -> int:
+    """Row i of a candidate list cut to its live entries closer than sqrt(radius2), in the
+    candidates' order; counted only when ``slot`` < 0, else written from ``slot`` on."""
+    xi = x[i]
+    yi = y[i]
+    zi = z[i]
+    found = 0
+    for m in range(candidates.start[i], candidates.start[i + 1]):
+        j = candidates.indices[m]
+        dx = x[j] - xi
+        dy = y[j] - yi
+        dz = z[j] - zi
+        r2 = dx * dx + dy * dy + dz * dz
+        if r2 < radius2 and alive[j]:
+            if slot >= 0:
+                index[slot + found] = j
+                distance[slot + found] = math.sqrt(r2)
+            found += 1
+    return found
+
+
+@njit(cache=True, parallel=True)
+def filter_neighbours(
+    candidates: Neighbours,
+    position: np.ndarray,
+    alive: np.ndarray,
+    rows: np.ndarray,
+    radius: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The neighbour list within ``radius`` (m) at ``position``, for the live particles with
+    ``rows[i]``, taken from a list of ``candidates`` built at other positions with a larger
+    radius (a Verlet list: it holds every pair now closer than ``radius`` while no particle
+    has moved more than half the difference of the radii since it was built). Within a row,
+    the candidates' order. Returns the arrays of :class:`Neighbours` in the buffers ``index``
+    and ``distance`` (or new ones), like :func:`search_neighbours`; coordinates per axis as in
+    :func:`_scan_cells`."""
+    n, dim = position.shape
+    coordinates = np.zeros((3, n))
+    for i in prange(n):
+        for k in range(dim):
+            coordinates[k, i] = position[i, k]
+    x = coordinates[0]
+    y = coordinates[1]
+    z = coordinates[2]
+    active = np.flatnonzero(alive & rows)
+    radius2 = radius * radius
+    row_count = np.zeros(n + 1, dtype=np.int64)
+    for a in prange(active.shape[0]):  # first pass: count each row
+        i = active[a]
+        row_count[i + 1] = _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, -1)
+    for i in range(n):
+        row_count[i + 1] += row_count[i]
+    index = _room(index, int(row_count[n]))
+    distance = _room(distance, int(row_count[n]))
+    for a in prange(active.shape[0]):  # second pass: fill each row
+        i = active[a]
+        _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, row_count[i])
+    return row_count, index, distance
+
+
+@njit(cache=True, parallel=True)
+def largest_displacement(position: np.ndarray, reference: np.ndarray, alive: np.ndarray) -> float:
+    """The largest distance (m) of a live particle from its ``reference`` position."""
+    n, dim = position.shape
+    largest = np.zeros(n)
+    for i in prange(n):
+        if alive[i]:
+            r2 = 0.0
+            for k in range(dim):
+                d = position[i, k] - reference[i, k]
+                r2 += d * d
+            largest[i] = r2
+    return math.sqrt(largest.max()) if n else 0.0
 
 
 # ------------------------------------------------------------------------------- particle models
@@ -530,8 +649,9 @@ def assemble_poisson(
     n_rows: int,
     constants: Constants,
     diagonal_shift: float,
-    sort_columns: bool = True,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    sort_columns: bool,
+    buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Matrix of the pressure Poisson equation, Eq. (F8), over the unknown particles (live fluid
     and wall particles not on the free surface; ``row_of`` numbers them).
 
@@ -542,7 +662,10 @@ def assemble_poisson(
     weakly diagonally dominant, positive definite when c > 0 or a Dirichlet neighbour is reached.
     Returns (indptr, indices, data, diagonal) of :class:`Matrix`, columns sorted per row; with
     ``sort_columns`` False each row is the diagonal followed by the neighbours in neighbour-list
-    order (for solvers that need no order: the serial sort is skipped).
+    order (for solvers that need no order: the serial sort is skipped). ``buffers``: arrays
+    reused for the rows in neighbour order (int64 and float64) and the sorted ones (likewise),
+    see :func:`_room`; the returned (indices, data) run past ``indptr[-1]``, and the two
+    buffers of the other order come after them, to be passed again next time.
     """
     n = kind.shape[0]
     re = constants.re_laplacian
@@ -562,8 +685,8 @@ def assemble_poisson(
     for row in range(n_rows):
         indptr[row + 1] += indptr[row]
     # Rows in neighbour order, the diagonal first
-    unsorted_indices = np.empty(indptr[n_rows], dtype=np.int64)
-    unsorted_data = np.empty(indptr[n_rows])
+    unsorted_indices = _room(buffers[0], indptr[n_rows])
+    unsorted_data = _room(buffers[1], indptr[n_rows])
     for row in prange(n_rows):
         i = particle_of[row]
         start = indptr[row]
@@ -583,12 +706,12 @@ def assemble_poisson(
                 end += 1
         unsorted_data[start] = total + diagonal_shift
     if not sort_columns:
-        return indptr, unsorted_indices, unsorted_data, indptr[:-1].copy()
+        return indptr, unsorted_indices, unsorted_data, indptr[:-1].copy(), buffers[2], buffers[3]
     # Sorted columns by transposition: A is symmetric to the last bit (r_ij and r_ji are the
     # same floating-point numbers), and sweeping the rows in order appends to each transposed
     # row its columns in increasing order.
-    indices = np.empty(indptr[n_rows], dtype=np.int64)
-    data = np.empty(indptr[n_rows])
+    indices = _room(buffers[2], indptr[n_rows])
+    data = _room(buffers[3], indptr[n_rows])
     diagonal = np.empty(n_rows, dtype=np.int64)
     fill = indptr[:-1].copy()
     for row in range(n_rows):
@@ -600,7 +723,7 @@ def assemble_poisson(
             data[q] = unsorted_data[p]
             if column == row:
                 diagonal[row] = q
-    return indptr, indices, data, diagonal
+    return indptr, indices, data, diagonal, unsorted_indices, unsorted_data
 
 
 @njit(cache=True, parallel=True, fastmath=FAST)

@@ -71,6 +71,11 @@ class MPSParameters:
       "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
       :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
       ``|b - A p| / |b|``.
+    - ``neighbour_skin`` (l0): 0, a cell search for each neighbour list (two a step); above 0,
+      one search with the radius widened by the skin serves as a Verlet list, cut to the radius
+      at each use and searched again only when some particle has moved half the skin since
+      (:meth:`MPSSolver.neighbours`). The lists then keep the order of the wider search, so
+      sums run in another order than with 0: the same physics, other round-off.
     - ``compressibility`` alpha (1/Pa): adds ``(rho alpha / dt^2) p`` to the PPE's left side, the
       fluid's slight compressibility [Ikeda et al. 2001]. It keeps the matrix non-singular when no
       particle is on the free surface; water's 0.45e-9 1/Pa makes it a regulariser only.
@@ -97,6 +102,7 @@ class MPSParameters:
     surface: str = "standard"
     solver: str = "iccg"
     coarse_cell: float = 4.0
+    neighbour_skin: float = 0.0
     tolerance: float = 1e-8
     max_iterations: int = 2000
     courant: float = 0.2
@@ -256,6 +262,21 @@ class MPSSolver:
         self._neighbour_count = np.zeros(n, dtype=np.int64)
         self._scratch = np.zeros(n)
         self._row_of = np.empty(n, dtype=np.int64)
+        # Verlet list (neighbour_skin > 0): candidates within search_radius + skin of each
+        # particle at the reference positions; None until the first use.
+        self._candidates: kernels.Neighbours | None = None
+        self._reference_position = np.empty_like(self.position)
+        self._reference_alive = np.zeros(n, dtype=np.bool_)
+        self.searches = 0  # cell searches so far (neighbour lists built from scratch)
+        # Buffers kept from step to step for the large arrays (kernels._room): the lists at r^k
+        # and r*, the Verlet list, and the PPE matrix (two orders, integer and real each).
+        self._buffers: dict[str, list[np.ndarray]] = {
+            name: [np.empty(0, dtype=np.int64), np.empty(0)]
+            for name in ("start", "star", "candidates")
+        }
+        self._matrix_buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
+            np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.int64), np.empty(0)
+        )  # fmt: skip
 
     # ------------------------------------------------------------------------------ time step
 
@@ -314,10 +335,7 @@ class MPSSolver:
         # Neighbours at r^k: rows for the particles the explicit stage moves (and, for the mixed
         # source, the walls, whose n^k enters the PPE)
         moving = self.kind == FLUID if p.source == "standard" else self.kind != DUMMY
-        nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, moving, self.search_radius),
-            self.search_radius,
-        )
+        nb = self.neighbours(moving, "start")
         if p.source == "mixed":  # n^k for the mixed source [Tanaka & Masunaga 2010]
             kernels.number_density(
                 nb, self.alive, c.re_number_density, self._scratch, self._neighbour_count
@@ -341,7 +359,7 @@ class MPSSolver:
         lap("explicit")
 
         # Neighbours, number density n*, free surface and PPE at r*, Eq. (F2), (F7)-(F9)
-        system = self.poisson_system(dt, clock=lap)
+        system = self.poisson_system(dt, clock=lap, reuse=True)
         stats.surface = system.surface
         matrix, rhs, particles = system.matrix, system.rhs, system.particles
 
@@ -391,21 +409,99 @@ class MPSSolver:
         lap("correction")
         return stats
 
+    def neighbours(self, rows: np.ndarray, buffer: str | None = None) -> kernels.Neighbours:
+        """The neighbours within ``search_radius`` of the live particles with ``rows[i]`` ((N,)
+        bool, no dummies) at the current positions. In arrays of their own, or with
+        ``buffer`` in the solver's buffers of that name ("start" for the list at the start of a
+        step, "star" for the one at r*), valid until the next list in the same buffers.
+
+        With ``neighbour_skin`` 0, a cell search. Otherwise cut from the Verlet list, which is
+        searched again (at the current positions, radius widened by the skin) when it is
+        missing or when a live particle has moved more than half the skin since it was built:
+        until then it holds every pair now closer than the radius."""
+        p = self.params
+        if p.neighbour_skin <= 0.0:
+            self.searches += 1
+            return self._keep(
+                buffer,
+                kernels.search_neighbours(
+                    self.position, self.alive, rows, self.search_radius, *self._buffer(buffer)
+                ),
+                self.search_radius,
+            )
+        if (
+            self._candidates is None
+            or kernels.largest_displacement(self.position, self._reference_position, self.alive)
+            > 0.5 * p.neighbour_skin * p.l0
+        ):
+            self._reference_position[:] = self.position
+            self._reference_alive[:] = self.alive
+            self._build_candidates()
+        assert self._candidates is not None
+        return self._keep(
+            buffer,
+            kernels.filter_neighbours(
+                self._candidates,
+                self.position,
+                self.alive,
+                rows,
+                self.search_radius,
+                *self._buffer(buffer),
+            ),  # fmt: skip
+            self.search_radius,
+        )
+
+    def _keep(
+        self, buffer: str | None, arrays: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
+    ) -> kernels.Neighbours:
+        """A list returned by a kernel into the buffers ``buffer``: the buffers (perhaps grown)
+        kept for next time (``buffer`` None: the arrays are the list's own), the list cut to its
+        length."""
+        start, index, distance = arrays
+        if buffer is not None:
+            self._buffers[buffer] = [index, distance]
+        end = int(start[-1])
+        return kernels.Neighbours(start, index[:end], distance[:end], radius)
+
+    def _buffer(self, name: str | None) -> list[np.ndarray]:
+        """The buffers ``name`` (index and distance), or empty arrays for ``None``."""
+        if name is None:
+            return [np.empty(0, dtype=np.int64), np.empty(0)]
+        return self._buffers[name]
+
+    def _build_candidates(self) -> None:
+        """The Verlet list at the reference positions (a function of those and the reference
+        live set only, so a resumed run rebuilds the very same list)."""
+        p = self.params
+        radius = self.search_radius + p.neighbour_skin * p.l0
+        self.searches += 1
+        self._candidates = None  # its arrays are the buffers about to be overwritten
+        self._candidates = self._keep(
+            "candidates",
+            kernels.search_neighbours(
+                self._reference_position,
+                self._reference_alive,
+                self.kind != DUMMY,
+                radius,
+                *self._buffers["candidates"],
+            ),  # fmt: skip
+            radius,
+        )
+
     def poisson_system(
-        self, dt: float, clock: Callable[[str], None] | None = None
+        self, dt: float, clock: Callable[[str], None] | None = None, reuse: bool = False
     ) -> PoissonSystem:
         """The pressure Poisson equation at the current positions (taken as r*): neighbours,
         number density n* (stored in ``number_density``), free-surface particles (Dirichlet
         p = 0, Eq. F7) and ``A p = b`` over the other live fluid and wall particles (Eq. F8).
-        ``clock`` (if given) is called with the phase names "neighbours" and "assembly"."""
+        ``clock`` (if given) is called with the phase names "neighbours" and "assembly".
+        ``reuse``: the matrix and neighbour list are written into the solver's buffers (as
+        :meth:`step` does), valid until the next step or call; otherwise arrays of their own."""
         p = self.params
         c = self.constants
         # Dummies need no row: they only complete the number density of their neighbours.
         solid = self.alive & (self.kind != DUMMY)
-        nb = kernels.Neighbours(
-            *kernels.neighbour_list(self.position, self.alive, solid, self.search_radius),
-            self.search_radius,
-        )
+        nb = self.neighbours(solid, "star" if reuse else None)
         kernels.number_density(
             nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
         )
@@ -425,12 +521,17 @@ class MPSSolver:
         particles[self._row_of[unknown]] = np.flatnonzero(unknown)
         shift = p.density * p.compressibility / dt**2
         ordered = p.solver != "deflated"  # the deflated solver needs no column order
-        matrix = kernels.Matrix(
-            *kernels.assemble_poisson(
-                nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered
-            ),
-            blocks[:2].copy(),
+        no_int, no_real = np.empty(0, dtype=np.int64), np.empty(0)
+        buffers = self._matrix_buffers if reuse else (no_int, no_real, no_int, no_real)
+        indptr, indices, data, diagonal, spare_indices, spare_data = kernels.assemble_poisson(
+            nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered, buffers
         )
+        if reuse and ordered:
+            self._matrix_buffers = (spare_indices, spare_data, indices, data)
+        elif reuse:
+            self._matrix_buffers = (indices, data, spare_indices, spare_data)
+        nnz = int(indptr[-1])
+        matrix = kernels.Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy())
         rhs = self.poisson_source(dt, particles, nb)
         if clock is not None:
             clock("assembly")
@@ -460,8 +561,10 @@ class MPSSolver:
     # ---------------------------------------------------------------------------- checkpoints
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        """Copies of everything a bitwise resume needs (the pressure is the warm start)."""
-        return {
+        """Copies of everything a bitwise resume needs (the pressure is the warm start; with a
+        neighbour skin, the positions and live set the Verlet list was built at, from which
+        :meth:`restore` builds it again)."""
+        arrays = {
             "position": self.position.copy(),
             "velocity": self.velocity.copy(),
             "pressure": self.pressure.copy(),
@@ -470,6 +573,10 @@ class MPSSolver:
             "kind": self.kind.copy(),
             "time": np.array(self.time),
         }
+        if self._candidates is not None:
+            arrays["neighbour_reference_position"] = self._reference_position.copy()
+            arrays["neighbour_reference_alive"] = self._reference_alive.copy()
+        return arrays
 
     def restore(self, arrays: dict[str, np.ndarray]) -> None:
         """Load a :meth:`state_arrays` dictionary into the live arrays (in place)."""
@@ -479,6 +586,11 @@ class MPSSolver:
                 raise ValueError(f"{name}: shape {arrays[name].shape}, expected {target.shape}")
             target[...] = arrays[name]
         self.time = float(arrays["time"])
+        self._candidates = None
+        if "neighbour_reference_position" in arrays and self.params.neighbour_skin > 0.0:
+            self._reference_position[:] = arrays["neighbour_reference_position"]
+            self._reference_alive[:] = arrays["neighbour_reference_alive"]
+            self._build_candidates()
 
 
 def substep(remaining: float, limit: float) -> float:

@@ -59,6 +59,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         surface_threshold=f.surface_threshold,
         solver=f.solver,
         coarse_cell=f.coarse_cell,
+        neighbour_skin=f.neighbour_skin,
         tolerance=f.tolerance,
         courant=f.courant,
     )
