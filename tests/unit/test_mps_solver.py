@@ -210,7 +210,7 @@ def test_two_block_ordering_uncouples_the_blocks_and_solves_the_same_system(monk
 def test_ic0_breakdown_is_shifted() -> None:
     """An indefinite matrix makes IC(0) fail unshifted; a diagonal shift is applied and named."""
     indptr = np.array([0, 2, 4])
-    indices = np.array([0, 1, 0, 1])
+    indices = np.array([0, 1, 0, 1], dtype=np.int32)
     data = np.array([1.0, 1.05, 1.05, 1.0])
     matrix = kernels.Matrix(indptr, indices, data, np.array([0, 3]), np.array([2, 2]))
     factor = np.zeros(4)

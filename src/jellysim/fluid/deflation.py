@@ -50,39 +50,50 @@ def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[n
     return key, int(key.max()) + 1
 
 
-@njit(cache=True)
+# Aggregates per chunk of the parallel loops that build W: each chunk keeps its own marker
+# arrays over the n columns, and the rows come out the same whatever the chunks.
+_CHUNK = 64
+
+
+@njit(cache=True, parallel=True)
 def _restricted_rows(
     matrix: Matrix, m: int, members_start: np.ndarray, members: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """W = Z^T A (m, n) in CSR: row a is the sum of A's rows over the members of aggregate a,
-    its columns in the order first met. Two sweeps: one counts the columns, one sums."""
+    its columns in the order first met. Two sweeps over chunks of aggregates in parallel: one
+    counts the columns, one sums."""
     n = matrix.indptr.shape[0] - 1
-    seen = np.full(n, -1, dtype=np.int64)
+    chunks = (m + _CHUNK - 1) // _CHUNK
     indptr = np.zeros(m + 1, dtype=np.int64)
+    for c in prange(chunks):
+        seen = np.full(n, -1, dtype=np.int64)
+        for a in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
+            found = 0
+            for t in range(members_start[a], members_start[a + 1]):
+                i = members[t]
+                for p in range(matrix.indptr[i], matrix.indptr[i + 1]):
+                    j = matrix.indices[p]
+                    if seen[j] != a:
+                        seen[j] = a
+                        found += 1
+            indptr[a + 1] = found
     for a in range(m):
-        found = 0
-        for t in range(members_start[a], members_start[a + 1]):
-            i = members[t]
-            for p in range(matrix.indptr[i], matrix.indptr[i + 1]):
-                j = matrix.indices[p]
-                if seen[j] != a:
-                    seen[j] = a
-                    found += 1
-        indptr[a + 1] = indptr[a] + found
+        indptr[a + 1] += indptr[a]
     indices = np.empty(indptr[m], dtype=np.int64)
     data = np.zeros(indptr[m])
-    slot = np.full(n, -1, dtype=np.int64)
-    for a in range(m):
-        end = indptr[a]
-        for t in range(members_start[a], members_start[a + 1]):
-            i = members[t]
-            for p in range(matrix.indptr[i], matrix.indptr[i + 1]):
-                j = matrix.indices[p]
-                if slot[j] < indptr[a]:  # first time in row a (earlier rows' slots are lower)
-                    slot[j] = end
-                    indices[end] = j
-                    end += 1
-                data[slot[j]] += matrix.data[p]
+    for c in prange(chunks):
+        slot = np.full(n, -1, dtype=np.int64)
+        for a in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
+            end = indptr[a]
+            for t in range(members_start[a], members_start[a + 1]):
+                i = members[t]
+                for p in range(matrix.indptr[i], matrix.indptr[i + 1]):
+                    j = matrix.indices[p]
+                    if slot[j] < indptr[a]:  # first time in row a (earlier rows' are lower)
+                        slot[j] = end
+                        indices[end] = j
+                        end += 1
+                    data[slot[j]] += matrix.data[p]
     return indptr, indices, data
 
 

@@ -61,7 +61,7 @@ class Matrix(NamedTuple):
     block."""
 
     indptr: np.ndarray  # (n + 1,) int64
-    indices: np.ndarray  # (nnz,) int64
+    indices: np.ndarray  # (nnz,) int32 (the products with A are bound by memory bandwidth)
     data: np.ndarray  # (nnz,) float64
     diagonal: np.ndarray  # (n,) int64
     blocks: np.ndarray  # (2,) int64
@@ -663,7 +663,7 @@ def assemble_poisson(
     Returns (indptr, indices, data, diagonal) of :class:`Matrix`, columns sorted per row; with
     ``sort_columns`` False each row is the diagonal followed by the neighbours in neighbour-list
     order (for solvers that need no order: the serial sort is skipped). ``buffers``: arrays
-    reused for the rows in neighbour order (int64 and float64) and the sorted ones (likewise),
+    reused for the rows in neighbour order (int32 and float64) and the sorted ones (likewise),
     see :func:`_room`; the returned (indices, data) run past ``indptr[-1]``, and the two
     buffers of the other order come after them, to be passed again next time.
     """

@@ -275,7 +275,7 @@ class MPSSolver:
             for name in ("start", "star", "candidates")
         }
         self._matrix_buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
-            np.empty(0, dtype=np.int64), np.empty(0), np.empty(0, dtype=np.int64), np.empty(0)
+            np.empty(0, dtype=np.int32), np.empty(0), np.empty(0, dtype=np.int32), np.empty(0)
         )  # fmt: skip
 
     # ------------------------------------------------------------------------------ time step
@@ -521,7 +521,7 @@ class MPSSolver:
         particles[self._row_of[unknown]] = np.flatnonzero(unknown)
         shift = p.density * p.compressibility / dt**2
         ordered = p.solver != "deflated"  # the deflated solver needs no column order
-        no_int, no_real = np.empty(0, dtype=np.int64), np.empty(0)
+        no_int, no_real = np.empty(0, dtype=np.int32), np.empty(0)
         buffers = self._matrix_buffers if reuse else (no_int, no_real, no_int, no_real)
         indptr, indices, data, diagonal, spare_indices, spare_data = kernels.assemble_poisson(
             nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered, buffers
