@@ -386,6 +386,18 @@ def filter_neighbours(
 
 
 @njit(cache=True, parallel=True)
+def listed(neighbours: Neighbours, rows: np.ndarray) -> np.ndarray:
+    """(N,) bool: the particles that appear in the rows ``rows`` ((R,) int64) of
+    ``neighbours``. (Threads may store True into the same entry: the outcome is the same.)"""
+    out = np.zeros(neighbours.start.shape[0] - 1, dtype=np.bool_)
+    for a in prange(rows.shape[0]):
+        i = rows[a]
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            out[neighbours.indices[m]] = True
+    return out
+
+
+@njit(cache=True, parallel=True)
 def largest_displacement(position: np.ndarray, reference: np.ndarray, alive: np.ndarray) -> float:
     """The largest distance (m) of a live particle from its ``reference`` position."""
     n, dim = position.shape
