@@ -108,7 +108,7 @@ def test_verlet_list_cut_to_the_radius_equals_a_fresh_search(dim: int) -> None:
     alive_now = alive & (rng.random(n) > 0.05)  # some die in between
     assert kernels.largest_displacement(moved, position, alive_now) < 0.5 * skin
     start, index, distance = kernels.filter_neighbours(
-        candidates, moved, alive_now, rows, radius, np.empty(0, np.int64), np.empty(0)
+        candidates, moved, alive_now, rows, radius, np.empty(0, np.int32), np.empty(0)
     )
     fresh = kernels.neighbour_list(moved, alive_now, rows, radius)
     assert np.array_equal(start, fresh[0])
@@ -126,7 +126,7 @@ def test_search_writes_into_a_buffer_that_holds_the_list_and_grows_one_that_does
     exact = kernels.neighbour_list(position, alive, alive, 0.2)
     total = int(exact[0][-1])
     for size in (total + 100, total // 2):
-        index_buffer, distance_buffer = np.full(size, -7, np.int64), np.zeros(size)
+        index_buffer, distance_buffer = np.full(size, -7, np.int32), np.zeros(size)
         start, index, distance = kernels.search_neighbours(
             position, alive, alive, 0.2, index_buffer, distance_buffer
         )

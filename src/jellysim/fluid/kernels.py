@@ -47,7 +47,7 @@ class Neighbours(NamedTuple):
     (live particles within ``radius`` of it, itself excluded) at distances ``distance`` (m)."""
 
     start: np.ndarray  # (N + 1,) int64
-    indices: np.ndarray  # (M,) int64
+    indices: np.ndarray  # (M,) int32 (a quarter less to write and read than int64)
     distance: np.ndarray  # (M,) float64
     radius: float  # m
 
@@ -265,7 +265,7 @@ def search_neighbours(
     within ``CELLS_PER_RADIUS`` of its own along each axis, once to count and once to fill.
     Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
     within a row the order is fixed (cell order, then particle index). ``indices`` and
-    ``distance`` are the buffers ``index`` ((K,) int64) and ``distance`` ((K,) float64) when
+    ``distance`` are the buffers ``index`` ((K,) int32) and ``distance`` ((K,) float64) when
     they hold the list, else new ones (:func:`_room`), and run past the list's end ``start[N]``.
     """
     n = position.shape[0]
@@ -279,7 +279,7 @@ def search_neighbours(
     active = np.flatnonzero(alive & rows)
     n_active = active.shape[0]
     row_count = np.zeros(n + 1, dtype=np.int64)
-    none_i = np.empty(0, dtype=np.int64)
+    none_i = np.empty(0, dtype=np.int32)
     none_f = np.empty(0)
     for a in prange(n_active):  # first pass: count each row
         i = active[a]
@@ -306,7 +306,7 @@ def neighbour_list(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`search_neighbours` into arrays of the list's own length."""
     start, index, distance = search_neighbours(
-        position, alive, rows, radius, np.empty(0, dtype=np.int64), np.empty(0)
+        position, alive, rows, radius, np.empty(0, dtype=np.int32), np.empty(0)
     )
     return start, index[: start[-1]].copy(), distance[: start[-1]].copy()
 

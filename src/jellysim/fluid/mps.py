@@ -272,7 +272,7 @@ class MPSSolver:
         # Buffers kept from step to step for the large arrays (kernels._room): the lists at r^k
         # and r*, the Verlet list, and the PPE matrix (two orders, integer and real each).
         self._buffers: dict[str, list[np.ndarray]] = {
-            name: [np.empty(0, dtype=np.int64), np.empty(0)]
+            name: [np.empty(0, dtype=np.int32), np.empty(0)]
             for name in ("start", "star", "candidates")
         }
         self._matrix_buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
@@ -468,7 +468,7 @@ class MPSSolver:
     def _buffer(self, name: str | None) -> list[np.ndarray]:
         """The buffers ``name`` (index and distance), or empty arrays for ``None``."""
         if name is None:
-            return [np.empty(0, dtype=np.int64), np.empty(0)]
+            return [np.empty(0, dtype=np.int32), np.empty(0)]
         return self._buffers[name]
 
     def _build_candidates(self) -> None:
