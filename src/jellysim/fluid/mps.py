@@ -507,8 +507,7 @@ class MPSSolver:
         margin = self.search_radius - p.re_number_density * p.l0
         fluid_rows = np.flatnonzero(self.alive & (self.kind == FLUID))
         if start.radius < self.search_radius or (
-            kernels.largest_displacement(self.position, self._start_position, self.alive)
-            > margin
+            kernels.largest_displacement(self.position, self._start_position, self.alive) > margin
         ):
             return None
         return kernels.listed(start, fluid_rows) & (self.kind == WALL) | (
