@@ -251,3 +251,13 @@ def test_existing_result_is_not_overwritten(tmp_path: Path) -> None:
 def test_argparse_errors_fit_three_lines(tmp_path: Path) -> None:
     proc = jellysim(tmp_path, "run", "--out", "out")
     assert_rejected(proc.returncode, proc.stdout, proc.stderr, ("scene",), tmp_path / "out")
+
+
+def test_mixed_source_without_the_corrected_gradient_is_refused(tmp_path: Path) -> None:
+    """The mixed source is unstable with the standard gradient (docs/fluid.md): refused before
+    anything is written, naming the key to set."""
+    check_subprocess(
+        tmp_path,
+        ("run", "dam-break-2d", "--set", "fluid.source=mixed"),
+        ("fluid.source = 'mixed'", "fluid.gradient = 'corrected'"),
+    )

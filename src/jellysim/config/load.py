@@ -279,6 +279,11 @@ def _check_soft_bell(scene: Scene) -> None:
 def _check_fluid(scene: Scene) -> None:
     """The tank and the water must sit on the fluid's lattice, the water inside the tank."""
     f = scene.fluid
+    if f.source == "mixed" and f.gradient != "corrected":
+        raise InputError(
+            "fluid.source = 'mixed' needs fluid.gradient = 'corrected': with the standard "
+            "gradient the mixed source is unstable (docs/fluid.md)"
+        )
     lengths = ["tank_width", "tank_height", "water_height"]
     if f.geometry == "dam-break":
         lengths.append("water_width")

@@ -268,9 +268,18 @@ class Fluid:
     source: str = param(
         "standard",
         kind="choice",
-        choices=("standard",),
-        doc="PPE source: number density (Koshizuka & Oka 1996); the mixed source of Tanaka & "
-        "Masunaga (2010) is in jellysim.fluid but not yet validated for scenes",
+        choices=("standard", "mixed"),
+        doc="PPE source: 'standard', the number density (Koshizuka & Oka 1996); 'mixed', the "
+        "velocity divergence plus 0.01 of the number density (Tanaka & Masunaga 2010), with "
+        "gradient = 'corrected' only",
+    )
+    gradient: str = param(
+        "standard",
+        kind="choice",
+        choices=("standard", "corrected"),
+        doc="pressure gradient: 'standard', the minimum-pressure gradient (Koshizuka & Oka "
+        "1996); 'corrected', times the inverse moment matrix of each particle's neighbourhood "
+        "(Khayyer & Gotoh 2011), exact for a linear pressure at the surface and walls",
     )
     surface: str = param(
         "standard",

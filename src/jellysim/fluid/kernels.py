@@ -965,6 +965,44 @@ def conjugate_gradient(
 # ------------------------------------------------------------------------------------ correction
 
 
+# Corrected gradient (Eq. F10a): the moment matrix is inverted only where det(C) is at least
+# this (1 on a full lattice, about 0.5 at a flat free surface or wall); fewer or one-sided
+# neighbours (a splash) keep the uncorrected gradient.
+CORRECTION_MIN_DETERMINANT = 0.3
+
+
+@njit(cache=True)
+def _solve_small(matrix: np.ndarray, vector: np.ndarray) -> bool:
+    """Solve ``matrix x = vector`` in place in ``vector`` for a symmetric 2x2 or 3x3 matrix by
+    Cramer's rule; False (``vector`` unchanged) when det < CORRECTION_MIN_DETERMINANT."""
+    if matrix.shape[0] == 2:
+        a, b, d = matrix[0, 0], matrix[0, 1], matrix[1, 1]
+        det = a * d - b * b
+        if det < CORRECTION_MIN_DETERMINANT:
+            return False
+        x = (d * vector[0] - b * vector[1]) / det
+        y = (a * vector[1] - b * vector[0]) / det
+        vector[0] = x
+        vector[1] = y
+        return True
+    m = matrix
+    c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
+    c01 = m[1, 2] * m[2, 0] - m[1, 0] * m[2, 2]
+    c02 = m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]
+    det = m[0, 0] * c00 + m[0, 1] * c01 + m[0, 2] * c02
+    if det < CORRECTION_MIN_DETERMINANT:
+        return False
+    c11 = m[0, 0] * m[2, 2] - m[0, 2] * m[2, 0]
+    c12 = m[0, 2] * m[1, 0] - m[0, 0] * m[1, 2]
+    c22 = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    v0, v1, v2 = vector[0], vector[1], vector[2]
+    # inverse = adjugate / det; the adjugate of a symmetric matrix is symmetric
+    vector[0] = (c00 * v0 + c01 * v1 + c02 * v2) / det
+    vector[1] = (c01 * v0 + c11 * v1 + c12 * v2) / det
+    vector[2] = (c02 * v0 + c12 * v1 + c22 * v2) / det
+    return True
+
+
 @njit(cache=True, parallel=True, fastmath=FAST)
 def pressure_correction(
     position: np.ndarray,
@@ -977,6 +1015,7 @@ def pressure_correction(
     dt: float,
     out_position: np.ndarray,
     out_velocity: np.ndarray,
+    corrected: bool = False,
 ) -> None:
     """Pressure gradient with the minimum neighbour pressure, Eq. (F10), and the correction of
     fluid particles, Eq. (F13):
@@ -984,6 +1023,10 @@ def pressure_correction(
     ``grad p_i = (D / n0) sum_j (p_j - p_min,i) / r_ij^2 (r_j - r_i) w(r_ij, r_e,grad)``, with
     ``p_min,i`` the least pressure among i and its fluid and wall neighbours within r_e,grad
     (dummies are ignored); ``u_i += -dt grad p_i / rho``, ``r_i += dt`` times that change.
+    With ``corrected``, Eq. (F10a): the gradient is multiplied by the inverse of the moment
+    matrix ``C_i = (D / n0) sum_j w (r_j - r_i) (r_j - r_i)^T / r_ij^2`` over the same
+    neighbours [Khayyer & Gotoh 2011], which makes it exact for a linear pressure on a
+    one-sided neighbourhood (the free surface, a wall), where C_i is not the identity.
     Other kinds are copied unchanged.
     """
     n, dim = position.shape
@@ -1002,6 +1045,7 @@ def pressure_correction(
             if neighbours.distance[m] < re and kind[j] != DUMMY:
                 lowest = min(lowest, pressure[j])
         gradient = np.zeros(dim)
+        moments = np.zeros((dim, dim))
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             j = neighbours.indices[m]
             r = neighbours.distance[m]
@@ -1010,6 +1054,18 @@ def pressure_correction(
             scale = (pressure[j] - lowest) / (r * r) * weight(r, re)
             for k in range(dim):
                 gradient[k] += scale * (position[j, k] - position[i, k])
+            if corrected:
+                w = weight(r, re) / (r * r)
+                for k in range(dim):
+                    for q in range(dim):
+                        moments[k, q] += (
+                            w
+                            * (position[j, k] - position[i, k])
+                            * (position[j, q] - position[i, q])
+                        )
+        if corrected:
+            moments *= dim / constants.n0_gradient
+            _solve_small(moments, gradient)
         for k in range(dim):
             du = coefficient * gradient[k]
             out_velocity[i, k] += du

@@ -7,6 +7,9 @@ References
 - Tanaka, M. & Masunaga, T. (2010). Stabilization and smoothing of pressure in MPS method by
   Quasi-Compressibility. J. Comput. Phys. 229, 4279-4290. Mixed source term
   (``source="mixed"``) and the neighbour-count surface criterion (``surface="neighbour-count"``).
+- Khayyer, A. & Gotoh, H. (2011). Enhancement of stability and accuracy of the moving particle
+  semi-implicit method. J. Comput. Phys. 230, 3093-3118. The corrected pressure gradient
+  (``gradient="corrected"``, Eq. F10a).
 - Ikeda, H., Koshizuka, S., Oka, Y. et al. (2001). Numerical analysis of jet injection behavior
   for fuel-coolant interaction using particle method. J. Nucl. Sci. Technol. 38, 174-182. The
   compressibility term of the pressure Poisson equation.
@@ -32,6 +35,7 @@ from jellysim.fluid.geometry import DUMMY, FLUID, WALL
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count")
 SOLVERS = ("iccg", "cg", "deflated")
+GRADIENTS = ("standard", "corrected")
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
 # PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
@@ -67,6 +71,11 @@ class MPSParameters:
       fewer than ``surface_neighbour_threshold`` N0 neighbours lie within r_e (N0 the lattice
       count) [Tanaka & Masunaga 2010]. Not yet sound: in the 2-D hydrostatic tank it lets a
       surface particle be kicked to ~7 m/s after 0.14 s; use "standard".
+    - ``gradient``: "standard", the minimum-pressure gradient of Eq. (F10) [Koshizuka & Oka
+      1996]; "corrected", the same multiplied by the inverse moment matrix of the particle's
+      neighbourhood, Eq. (F10a) [Khayyer & Gotoh 2011]: exact for a linear pressure where the
+      neighbourhood is one-sided (free surface, walls). The mixed source needs it: with the
+      standard gradient the mixed source's dam break blows up (docs/fluid.md).
     - ``solver``: "iccg" (IC(0)-preconditioned CG), "cg" (plain CG, for comparison) or
       "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
       :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
@@ -100,6 +109,7 @@ class MPSParameters:
     source: str = "standard"
     mixed_relaxation: float = 0.01
     surface: str = "standard"
+    gradient: str = "standard"
     solver: str = "iccg"
     coarse_cell: float = 4.0
     neighbour_skin: float = 0.0
@@ -118,6 +128,7 @@ class MPSParameters:
         for name, value, allowed in (
             ("source", self.source, SOURCES),
             ("surface", self.surface, SURFACES),
+            ("gradient", self.gradient, GRADIENTS),
             ("solver", self.solver, SOLVERS),
         ):
             if value not in allowed:
@@ -390,10 +401,10 @@ class MPSSolver:
         self.pressure[particles] = np.maximum(solution, 0.0)  # negative pressures clipped
         lap("solve")
 
-        # Pressure gradient and correction, Eq. (F10), (F13)
+        # Pressure gradient and correction, Eq. (F10) or (F10a), (F13)
         kernels.pressure_correction(
             self.position, self.velocity, self.pressure, self.kind, self.alive,
-            system.neighbours, c, dt, self._position, self._velocity,
+            system.neighbours, c, dt, self._position, self._velocity, p.gradient == "corrected",
         )  # fmt: skip
         self.position[:] = self._position
         self.velocity[:] = self._velocity

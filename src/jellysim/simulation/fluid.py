@@ -56,6 +56,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         gravity=tuple(w.gravity[: f.dimensions]),
         source=f.source,
         surface=f.surface,
+        gradient=f.gradient,
         surface_threshold=f.surface_threshold,
         solver=f.solver,
         coarse_cell=f.coarse_cell,
