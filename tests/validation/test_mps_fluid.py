@@ -99,16 +99,11 @@ def test_hydrostatic_tank_mixed_source_with_corrected_gradient_is_quieter() -> N
         y = start[fluid, 1]
         below = y < 0.1 - 1.5 * l0
         slope, intercept = np.polyfit(y[below], mean[fluid][below], 1)
-        figures[name] = (
-            speed,
-            drift.max(),
-            drift.mean(),
-            -slope / (DENSITY * GRAVITY),
-            intercept / -slope,
-        )
+        fit = (-slope / (DENSITY * GRAVITY), intercept / -slope)
+        figures[name] = (speed, drift.max(), drift.mean(), *fit)
         print(
             f"{name}: RMS speed {speed:.4f} m/s, drift max {drift.max():.2f} l0, mean "
-            f"{drift.mean():.2f} l0, slope {figures[name][3]:.4f} rho g, head {figures[name][4]:.5f} m"
+            f"{drift.mean():.2f} l0, slope {fit[0]:.4f} rho g, head {fit[1]:.5f} m"
         )
         assert solver.alive.all()
     speed, largest, average, slope, head = figures["mixed+corrected"]
