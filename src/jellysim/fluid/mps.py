@@ -36,7 +36,6 @@ SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count")
 SOLVERS = ("iccg", "cg", "deflated")
 GRADIENTS = ("standard", "corrected")
-ADAMI = False
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
 # PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
@@ -403,13 +402,8 @@ class MPSSolver:
         lap("solve")
 
         # Pressure gradient and correction, Eq. (F10) or (F10a), (F13)
-        pg = self.pressure
-        if ADAMI:
-            import adami
-            pg = np.empty_like(self.pressure)
-            adami.wall_pressure(self.position, self.pressure, self.kind, self.alive, system.neighbours, c.re_gradient, p.density, p.gravity_vector, pg, 0)
         kernels.pressure_correction(
-            self.position, self.velocity, pg, self.kind, self.alive,
+            self.position, self.velocity, self.pressure, self.kind, self.alive,
             system.neighbours, c, dt, self._position, self._velocity, p.gradient == "corrected",
         )  # fmt: skip
         self.position[:] = self._position
