@@ -133,3 +133,20 @@ def test_bad_fluid_scenes_exit_2(tmp_path: Path, sets: tuple[str, ...], fragment
     assert done.returncode == 2, done.stderr
     assert fragment in done.stderr and len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_scheme_keys_reach_the_solver() -> None:
+    """fluid.source and fluid.gradient of a scene are the solver's: hydrostatic-2d chooses the
+    mixed source with the corrected gradient, dam-break-2d the standard scheme."""
+    from jellysim.simulation.fluid import mps_parameters
+
+    still = mps_parameters(jellysim.load_scene("hydrostatic-2d"))
+    assert (still.source, still.gradient) == ("mixed", "corrected")
+    dam = mps_parameters(jellysim.load_scene("dam-break-2d"))
+    assert (dam.source, dam.gradient) == ("standard", "standard")
+    chosen = mps_parameters(
+        jellysim.load_scene(
+            "dam-break-2d", {"fluid.source": "mixed", "fluid.gradient": "corrected"}
+        )
+    )
+    assert (chosen.source, chosen.gradient) == ("mixed", "corrected")
