@@ -279,7 +279,7 @@ class Fluid:
         choices=("standard", "corrected"),
         doc="pressure gradient: 'standard', the minimum-pressure gradient (Koshizuka & Oka "
         "1996); 'corrected', times the inverse moment matrix of each particle's neighbourhood "
-        "(Khayyer & Gotoh 2011), exact for a linear pressure at the surface and walls",
+        "(Khayyer & Gotoh 2011): a particle at a flat free surface carries its full weight",
     )
     surface: str = param(
         "standard",

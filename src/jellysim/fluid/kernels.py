@@ -1025,8 +1025,10 @@ def pressure_correction(
     (dummies are ignored); ``u_i += -dt grad p_i / rho``, ``r_i += dt`` times that change.
     With ``corrected``, Eq. (F10a): the gradient is multiplied by the inverse of the moment
     matrix ``C_i = (D / n0) sum_j w (r_j - r_i) (r_j - r_i)^T / r_ij^2`` over the same
-    neighbours [Khayyer & Gotoh 2011], which makes it exact for a linear pressure on a
-    one-sided neighbourhood (the free surface, a wall), where C_i is not the identity.
+    neighbours [Khayyer & Gotoh 2011]. C_i is the identity on a full lattice and not where the
+    neighbourhood is one-sided (the free surface, a wall); there the corrected gradient is exact
+    for a linear pressure when p_i is the least of its neighbourhood (the top layer under
+    gravity), and otherwise off by the minimum-pressure term only.
     Other kinds are copied unchanged.
     """
     n, dim = position.shape
@@ -1045,7 +1047,6 @@ def pressure_correction(
             if neighbours.distance[m] < re and kind[j] != DUMMY:
                 lowest = min(lowest, pressure[j])
         gradient = np.zeros(dim)
-        moments = np.zeros((dim, dim))
         for m in range(neighbours.start[i], neighbours.start[i + 1]):
             j = neighbours.indices[m]
             r = neighbours.distance[m]
@@ -1054,7 +1055,13 @@ def pressure_correction(
             scale = (pressure[j] - lowest) / (r * r) * weight(r, re)
             for k in range(dim):
                 gradient[k] += scale * (position[j, k] - position[i, k])
-            if corrected:
+        if corrected:  # a pass of its own: the standard path allocates and sums nothing more
+            moments = np.zeros((dim, dim))
+            for m in range(neighbours.start[i], neighbours.start[i + 1]):
+                j = neighbours.indices[m]
+                r = neighbours.distance[m]
+                if r >= re or kind[j] == DUMMY:
+                    continue
                 w = weight(r, re) / (r * r)
                 for k in range(dim):
                     for q in range(dim):
@@ -1063,7 +1070,6 @@ def pressure_correction(
                             * (position[j, k] - position[i, k])
                             * (position[j, q] - position[i, q])
                         )
-        if corrected:
             moments *= dim / constants.n0_gradient
             _solve_small(moments, gradient)
         for k in range(dim):
