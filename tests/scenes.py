@@ -3,6 +3,10 @@
 ``SMALL_MOON``: the moon-jelly preset shrunk to issue 6's test scale: l0 = 0.25 m, a bell 8 l0
 wide and 5 l0 tall (448 particles) in a 22 x 22 x 18 l0 tank filled 15 l0 deep. Tests add the
 duration, frame rate, tentacles and material they need.
+
+``SWIM``: SMALL_MOON for three 2 s pulses (``SWIM_PERIOD``) at 10 frames a second with two
+tentacles and k = 31.25 N/m (20 N/m x 0.25 / 0.16, the preset's material at this spacing);
+``MUSCLE_OFF`` the muscle neither contracting nor stiffening.
 """
 
 from __future__ import annotations
@@ -17,3 +21,14 @@ SMALL_MOON: dict[str, object] = {
     "fluid.tank_height": 4.5,
     "fluid.water_height": 3.75,
 }
+
+SWIM_PERIOD = 2.0
+SWIM: dict[str, object] = {
+    **SMALL_MOON,
+    "duration": 3 * SWIM_PERIOD,
+    "fps": 10.0,
+    "tentacles.count": 2,
+    "bell.spring_stiffness": 31.25,
+    "bell.period": SWIM_PERIOD,
+}
+MUSCLE_OFF: dict[str, object] = {"bell.muscle_ratio": 0.0, "bell.muscle_stiffening": 1.0}

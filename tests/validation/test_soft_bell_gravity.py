@@ -26,17 +26,11 @@ import scenes
 import jellysim
 from jellysim.bell.swimming import swim_cycles
 
-PERIOD = 2.0
+PERIOD = scenes.SWIM_PERIOD
 L0 = 0.25
-COARSE = {
-    **scenes.SMALL_MOON,
-    "duration": 3 * PERIOD,
-    "fps": 10.0,
-    "tentacles.count": 2,
-    "bell.spring_stiffness": 31.25,
-    "bell.period": PERIOD,
-}
-OFF = {**COARSE, "bell.muscle_ratio": 0.0, "bell.muscle_stiffening": 1.0}
+COARSE = scenes.SWIM
+# The muscle off: no contraction and no stiffening.
+OFF = {**COARSE, **scenes.MUSCLE_OFF}
 
 
 def _run(folder: Path, overrides: dict[str, object]) -> dict[str, np.ndarray]:

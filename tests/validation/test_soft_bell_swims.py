@@ -27,17 +27,10 @@ import scenes
 import jellysim
 from jellysim.bell.swimming import phase_lag, swim_cycles
 
-PERIOD = 2.0
-COARSE = {
-    **scenes.SMALL_MOON,
-    "duration": 3 * PERIOD,
-    "fps": 10.0,
-    "tentacles.count": 2,
-    "bell.spring_stiffness": 31.25,
-    "bell.period": PERIOD,
-}
+PERIOD = scenes.SWIM_PERIOD
+COARSE = scenes.SWIM
 # The muscle off: no contraction and no stiffening.
-OFF = {**COARSE, "bell.muscle_ratio": 0.0, "bell.muscle_stiffening": 1.0}
+OFF = {**COARSE, **scenes.MUSCLE_OFF}
 
 
 def _swim(folder: Path, overrides: dict[str, object]) -> tuple[np.ndarray, ...]:
