@@ -73,9 +73,11 @@ class MPSParameters:
       surface particle be kicked to ~7 m/s after 0.14 s; use "standard".
     - ``gradient``: "standard", the minimum-pressure gradient of Eq. (F10) [Koshizuka & Oka
       1996]; "corrected", the same multiplied by the inverse moment matrix of the particle's
-      neighbourhood, Eq. (F10a) [Khayyer & Gotoh 2011]: exact for a linear pressure where the
-      neighbourhood is one-sided (free surface, walls). The mixed source needs it: with the
-      standard gradient the mixed source's dam break blows up (docs/fluid.md).
+      neighbourhood, Eq. (F10a) [Khayyer & Gotoh 2011]: a particle at a flat free surface
+      carries its full weight (the standard gradient balances half), and one-sided
+      neighbourhoods at walls are compensated but for the minimum-pressure term. The mixed
+      source needs it: with the standard gradient the mixed source's dam break blows up
+      (docs/fluid.md).
     - ``solver``: "iccg" (IC(0)-preconditioned CG), "cg" (plain CG, for comparison) or
       "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
       :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
