@@ -339,3 +339,17 @@ def test_substep_covers_the_rest_in_equal_steps_within_the_limit() -> None:
         remaining -= dt
     assert len(steps) == 8
     assert max(steps) - min(steps) < 1e-15
+
+
+@pytest.mark.parametrize("kappa", [None, 0.035])
+def test_step_at_rest_under_gravity(kappa: float | None) -> None:
+    """Water at rest: with the free-fall floor the CFL step assumes a fall over the water's
+    height, sqrt(2 g H); without it the acceleration limit kappa sqrt(l0 / g) sets the step,
+    kappa = sqrt(courant) unless given."""
+    g, height = 9.81, 2 * A  # the column's cell centres span 2a - l0; the extent adds l0
+    floored = dam_break(acceleration_number=kappa)
+    courant = floored.params.courant
+    assert floored.stable_dt() == pytest.approx(courant * L0 / np.sqrt(2 * g * height), rel=1e-12)
+    free = dam_break(acceleration_number=kappa, free_fall_floor=False)
+    expected = np.sqrt(courant) if kappa is None else kappa
+    assert free.stable_dt() == pytest.approx(expected * np.sqrt(L0 / g), rel=1e-12)

@@ -3,8 +3,9 @@ water, the bell's mean height rises in every pulse, at least five times more tha
 with the muscle off, and the upward speed follows the contraction with a phase lag ("phase shift
 occured between contraction and propulsion of the umbrella", paper §5).
 
-A coarse configuration of the moon-jelly preset (l0 = 0.25 m, R = 2 m, 14,564 fluid and 448 bell
-particles, k = 31.25 N/m = 20 N/m x 0.25 / 0.16, the preset's material at this spacing: k ~ l0,
+A coarse configuration of the moon-jelly-weightless preset (the paper's weightless water; under
+gravity: test_soft_bell_gravity.py) at l0 = 0.25 m, R = 2 m, 14,564 fluid and 448 bell particles,
+k = 31.25 N/m (20 N/m x 0.25 / 0.16, the preset's material at this spacing: k ~ l0,
 docs/theory/soft-bell.md §2), three 2 s pulses. Measured on 2026-11-23 (docs/soft-bell.md),
 against exactly 0 with the muscle off:
 - the preset's implicit springs and deflated pressure solver (2.2 MPS steps per 0.1 s frame):
@@ -34,7 +35,7 @@ OFF = {**COARSE, **scenes.MUSCLE_OFF}
 
 
 def _swim(folder: Path, overrides: dict[str, object]) -> tuple[np.ndarray, ...]:
-    with jellysim.run("moon-jelly", folder, overrides=overrides) as r:
+    with jellysim.run("moon-jelly-weightless", folder, overrides=overrides) as r:
         assert r.complete
         return (
             r.time,

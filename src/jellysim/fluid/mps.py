@@ -92,6 +92,8 @@ class MPSParameters:
       particle is on the free surface; water's 0.45e-9 1/Pa makes it a regulariser only.
     - ``free_fall_floor``: whether the CFL speed is floored at a free fall over the water's
       height (:meth:`MPSSolver.stable_dt`).
+    - ``acceleration_number`` kappa: the acceleration limit ``dt <= kappa sqrt(l0 / a)``, i.e. a
+      particle at rest moves ``kappa^2 l0 / 2`` in a step; None: ``sqrt(courant)``.
     - ``domain_min``/``domain_max`` (m): particles leaving the box die (``alive`` False). None:
       the initial particles' bounding box widened by its own size on every side.
     """
@@ -119,6 +121,7 @@ class MPSParameters:
     max_iterations: int = 2000
     courant: float = 0.2
     free_fall_floor: bool = True
+    acceleration_number: float | None = None
     diffusion_number: float = 0.2
     compressibility: float = 0.45e-9
     domain_min: tuple[float, ...] | None = None
@@ -302,8 +305,8 @@ class MPSSolver:
           force over density) and H the fluid's extent along gravity: the speed of a free fall
           over the fluid's height, for water that can fall (a dam break); a filled tank, where
           nothing falls, needs no floor;
-        - acceleration: ``sqrt(courant l0 / a)``, the step in which a particle at rest moves
-          courant l0;
+        - acceleration: ``kappa sqrt(l0 / a)`` with kappa = ``acceleration_number``, by default
+          ``sqrt(courant)``: the step in which a particle at rest moves courant l0 / 2;
         - viscosity: ``diffusion_number l0^2 / nu``.
         """
         p = self.params
@@ -321,7 +324,10 @@ class MPSSolver:
             if speed > 0.0:
                 limits.append(p.courant * p.l0 / speed)
         if a > 0.0:
-            limits.append(math.sqrt(p.courant * p.l0 / a))
+            if p.acceleration_number is None:
+                limits.append(math.sqrt(p.courant * p.l0 / a))
+            else:
+                limits.append(p.acceleration_number * math.sqrt(p.l0 / a))
         if p.kinematic_viscosity > 0.0:
             limits.append(p.diffusion_number * p.l0**2 / p.kinematic_viscosity)
         return min(limits)

@@ -34,6 +34,12 @@ from jellysim.simulation.fluid import fluid_particles, mps_parameters
 
 log = logging.getLogger(__name__)
 
+# kappa of the fluid's acceleration limit under gravity, dt <= kappa sqrt(l0 / g): gravity moves a
+# particle at rest g dt^2 / 2 = 0.0006 l0 in a step. Measured (docs/soft-bell.md): the coarse test
+# bell stays still at this step (18 steps a 0.1 s frame at l0 = 0.25 m); at 13 steps a frame
+# (g dt^2 = 0.0023 l0) the relaxed bell sinks 2.7 times as far and the swim's third pulse is lost.
+STILL_WATER_ACCELERATION_NUMBER = 0.035
+
 
 class SoftBellSimulation:
     """The soft bell in its tank and, when the scene has tentacles, the tentacles it drives."""
@@ -58,11 +64,17 @@ class SoftBellSimulation:
             [np.arange(len(water)), np.arange(self.bell_rows.stop, len(order))]
         )
         # Weightless water has nothing to fall: the fluid's speed alone sets the CFL step. Under
-        # gravity the step is floored at a free fall over the water's height, as for fluid-only
-        # scenes: without it the first step from rest is a whole 0.05 s frame at the preset's
-        # resolution, and the surface is thrown off at 50 m/s within 0.25 s (docs/soft-bell.md).
+        # gravity nothing falls either (the tank is full), but without a bound the first step from
+        # rest is a whole 0.05 s frame at the preset's resolution and the surface is thrown off at
+        # 50 m/s within 0.25 s. The bound is on gravity's work in a step: dt <= kappa sqrt(l0 / g),
+        # a particle at rest falling g dt^2 / 2 = kappa^2 l0 / 2 before the pressure holds it, with
+        # kappa = STILL_WATER_ACCELERATION_NUMBER (docs/soft-bell.md, "The time step under
+        # gravity"). The fluid-only scenes' free fall over the water's height, sqrt(2 g H), would
+        # take 17 steps a frame at the preset's resolution instead of 12.
         params = dataclasses.replace(
-            mps_parameters(scene), free_fall_floor=bool(np.any(scene.water.gravity))
+            mps_parameters(scene),
+            free_fall_floor=False,
+            acceleration_number=STILL_WATER_ACCELERATION_NUMBER,
         )
         self.solver = MPSSolver(params, positions[order], kinds[order])
         self.l0 = scene.fluid.spacing
