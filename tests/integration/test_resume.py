@@ -191,8 +191,9 @@ def test_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> None:
 
 
 # The soft bell in its fluid (issue 6): a small tank, two tentacles, checkpoints every 4 frames.
-# With the preset's implicit springs a simulated second takes about 4 s here: 2.5 s of simulation
-# leaves the poller many flushed batches to catch (1.0 s once finished before the kill in CI).
+# The preset under gravity (mixed source, corrected gradient, 9 MPS steps a 1/20 s frame here): a
+# simulated second takes about 14 s, so 2.5 s of simulation leaves the poller many flushed
+# batches to catch (in weightless water, 4 s a second, 1.0 s once finished before the kill in CI).
 SOFT_FPS = 20.0
 SOFT_DURATION = 2.5
 SOFT = [

@@ -302,17 +302,3 @@ def test_phase_lag_recovers_a_known_lag() -> None:
     assert phase_lag(time[:30], height[:30], contraction[:30], period) is None
     assert phase_lag(time, height, contraction, 2.03) is None
 
-
-def test_fluid_step_under_gravity_is_the_still_water_limit() -> None:
-    """Under gravity the soft bell's water steps at kappa sqrt(l0 / g) from rest (12 steps a
-    1/20 s frame at the preset's l0 = 0.16 m), not at a free fall over the tank's 5.9 m (17);
-    weightless water at rest sets no limit of its own."""
-    from jellysim.simulation import make_simulation
-    from jellysim.simulation.soft import STILL_WATER_ACCELERATION_NUMBER
-
-    moon = make_simulation(jellysim.load_scene("moon-jelly"))
-    dt = moon.solver.stable_dt()
-    assert dt == pytest.approx(STILL_WATER_ACCELERATION_NUMBER * math.sqrt(0.16 / 9.81))
-    assert math.ceil(moon.frame_dt / dt) == 12
-    weightless = make_simulation(jellysim.load_scene("moon-jelly-weightless"))
-    assert weightless.solver.stable_dt() > weightless.frame_dt

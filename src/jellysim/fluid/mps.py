@@ -138,6 +138,8 @@ class MPSParameters:
         ):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
+        if self.acceleration_number is not None and not self.acceleration_number > 0.0:
+            raise ValueError(f"acceleration_number must be > 0, not {self.acceleration_number}")
         if self.gravity is not None and len(self.gravity) != self.dim:
             raise ValueError(f"gravity needs {self.dim} components, not {len(self.gravity)}")
 

@@ -35,9 +35,11 @@ from jellysim.simulation.fluid import fluid_particles, mps_parameters
 log = logging.getLogger(__name__)
 
 # kappa of the fluid's acceleration limit under gravity, dt <= kappa sqrt(l0 / g): gravity moves a
-# particle at rest g dt^2 / 2 = 0.0006 l0 in a step. Measured (docs/soft-bell.md): the coarse test
-# bell stays still at this step (18 steps a 0.1 s frame at l0 = 0.25 m); at 13 steps a frame
-# (g dt^2 = 0.0023 l0) the relaxed bell sinks 2.7 times as far and the swim's third pulse is lost.
+# particle at rest g dt^2 / 2 = kappa^2 l0 / 2 = 0.0006 l0 in a step. Measured (docs/soft-bell.md):
+# the coarse test bell stays still at 18 steps a 0.1 s frame at l0 = 0.25 m (g dt^2 / 2 = 0.0006
+# l0 a step); at 13 steps (0.0012 l0) the relaxed bell sinks 2.7 times as far and the swim's third
+# pulse is lost. kappa in [0.0348, 0.0356) gives both the coarse test's 18 steps and the preset's
+# measured 12 (l0 = 0.16 m, 1/20 s frames).
 STILL_WATER_ACCELERATION_NUMBER = 0.035
 
 
@@ -64,7 +66,7 @@ class SoftBellSimulation:
             [np.arange(len(water)), np.arange(self.bell_rows.stop, len(order))]
         )
         # Weightless water has nothing to fall: the fluid's speed alone sets the CFL step. Under
-        # gravity nothing falls either (the tank is full), but without a bound the first step from
+        # gravity the water starts at rest and stays there, but without a bound the first step from
         # rest is a whole 0.05 s frame at the preset's resolution and the surface is thrown off at
         # 50 m/s within 0.25 s. The bound is on gravity's work in a step: dt <= kappa sqrt(l0 / g),
         # a particle at rest falling g dt^2 / 2 = kappa^2 l0 / 2 before the pressure holds it, with
