@@ -6,7 +6,7 @@ duration, frame rate, tentacles and material they need.
 
 ``SWIM``: SMALL_MOON for three 2 s pulses (``SWIM_PERIOD``) at 10 frames a second with two
 tentacles and k = 31.25 N/m (20 N/m x 0.25 / 0.16, the preset's material at this spacing);
-``MUSCLE_OFF`` the muscle neither contracting nor stiffening.
+``MUSCLE_OFF`` the muscle neither contracting nor stiffening, ``SWIM_OFF`` SWIM with it.
 """
 
 from __future__ import annotations
@@ -32,3 +32,4 @@ SWIM: dict[str, object] = {
     "bell.period": SWIM_PERIOD,
 }
 MUSCLE_OFF: dict[str, object] = {"bell.muscle_ratio": 0.0, "bell.muscle_stiffening": 1.0}
+SWIM_OFF: dict[str, object] = {**SWIM, **MUSCLE_OFF}

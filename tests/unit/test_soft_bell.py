@@ -301,4 +301,3 @@ def test_phase_lag_recovers_a_known_lag() -> None:
     # Frames that do not divide the period, or no whole pulse after the first: no lag.
     assert phase_lag(time[:30], height[:30], contraction[:30], period) is None
     assert phase_lag(time, height, contraction, 2.03) is None
-

@@ -32,7 +32,7 @@ PERIOD = scenes.SWIM_PERIOD
 L0 = 0.25
 COARSE = scenes.SWIM
 # The muscle off: no contraction and no stiffening.
-OFF = {**COARSE, **scenes.MUSCLE_OFF}
+OFF = scenes.SWIM_OFF
 
 
 def _run(folder: Path, overrides: dict[str, object]) -> dict[str, np.ndarray]:

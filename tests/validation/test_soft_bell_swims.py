@@ -31,7 +31,7 @@ from jellysim.bell.swimming import phase_lag, swim_cycles
 PERIOD = scenes.SWIM_PERIOD
 COARSE = scenes.SWIM
 # The muscle off: no contraction and no stiffening.
-OFF = {**COARSE, **scenes.MUSCLE_OFF}
+OFF = scenes.SWIM_OFF
 
 
 def _swim(folder: Path, overrides: dict[str, object]) -> tuple[np.ndarray, ...]:
