@@ -261,3 +261,12 @@ def test_mixed_source_without_the_corrected_gradient_is_refused(tmp_path: Path) 
         ("run", "dam-break-2d", "--set", "fluid.source=mixed"),
         ("fluid.source = 'mixed'", "fluid.gradient = 'corrected'"),
     )
+
+
+def test_hexagonal_lattice_in_three_dimensions_is_refused(tmp_path: Path) -> None:
+    """The hexagonal lattice is 2-D only: refused before anything is written."""
+    check_subprocess(
+        tmp_path,
+        ("run", "tank-3d", "--set", "fluid.lattice=hexagonal"),
+        ("fluid.lattice = 'hexagonal' is 2-D only",),
+    )

@@ -136,14 +136,19 @@ def test_bad_fluid_scenes_exit_2(tmp_path: Path, sets: tuple[str, ...], fragment
 
 
 def test_scheme_keys_reach_the_solver() -> None:
-    """fluid.source and fluid.gradient of a scene are the solver's: hydrostatic-2d chooses the
-    mixed source with the corrected gradient, dam-break-2d the standard scheme."""
+    """fluid.source, fluid.gradient and fluid.lattice of a scene are the solver's: hydrostatic-2d
+    chooses the mixed source with the corrected gradient on the hexagonal lattice (and its
+    surface threshold, 0.93), dam-break-2d the standard scheme on the square lattice (0.97)."""
     from jellysim.simulation.fluid import mps_parameters
 
     still = mps_parameters(jellysim.load_scene("hydrostatic-2d"))
-    assert (still.source, still.gradient) == ("mixed", "corrected")
+    assert (still.source, still.gradient, still.lattice) == ("mixed", "corrected", "hexagonal")
+    assert still.surface_threshold == 0.93
     dam = mps_parameters(jellysim.load_scene("dam-break-2d"))
-    assert (dam.source, dam.gradient) == ("standard", "standard")
+    assert (dam.source, dam.gradient, dam.lattice) == ("standard", "standard", "square")
+    assert dam.surface_threshold == 0.97
+    set_beta = jellysim.load_scene("hydrostatic-2d", {"fluid.surface_threshold": 0.95})
+    assert mps_parameters(set_beta).surface_threshold == 0.95
     chosen = mps_parameters(
         jellysim.load_scene(
             "dam-break-2d", {"fluid.source": "mixed", "fluid.gradient": "corrected"}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from jellysim.fluid import kernels
-from jellysim.fluid.geometry import DUMMY, FLUID, WALL, tank, water_block
+from jellysim.fluid.geometry import DUMMY, FLUID, WALL, filled_height, tank, water_block
 from jellysim.fluid.mps import MPSParameters, MPSSolver, lattice_reference
 
 # Lattice shells (squared distance in l0^2, number of lattice points), counted by hand.
@@ -17,6 +17,10 @@ SHELLS_2D_R21 = [(1, 4), (2, 4), (4, 4)]  # 12 points; sqrt(5) = 2.236 lies outs
 SHELLS_2D_R40 = [(1, 4), (2, 4), (4, 4), (5, 8), (8, 4), (9, 4), (10, 8), (13, 8)]  # 44
 SHELLS_3D_R21 = [(1, 6), (2, 12), (3, 8), (4, 6)]  # 32
 SHELLS_3D_R31 = [(1, 6), (2, 12), (3, 8), (4, 6), (5, 24), (6, 24), (8, 12), (9, 30)]  # 122
+# Hexagonal lattice: |m_1 + m_2 e^(i pi/3)|^2 = m_1^2 + m_1 m_2 + m_2^2 (Loeschian numbers)
+SHELLS_HEX_R21 = [(1, 6), (3, 6), (4, 6)]  # 18; sqrt(7) = 2.65 lies outside 2.1
+SHELLS_HEX_R31 = [(1, 6), (3, 6), (4, 6), (7, 12), (9, 6)]  # 36
+SHELLS_HEX_R40 = [(1, 6), (3, 6), (4, 6), (7, 12), (9, 6), (12, 6), (13, 12)]  # 54; 16 outside
 
 
 def by_hand(shells: list[tuple[int, int]], re: float) -> tuple[float, float, int]:
@@ -52,6 +56,27 @@ def test_lattice_constants_against_hand_counts(dim, re, shells, n0_literal) -> N
     assert ref.lambda_ == pytest.approx(lam * l0**2, rel=1e-12)
     if n0_literal is not None:
         assert ref.n0 == pytest.approx(n0_literal, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("re", "shells"), [(2.1, SHELLS_HEX_R21), (3.1, SHELLS_HEX_R31), (4.0, SHELLS_HEX_R40)]
+)
+def test_hexagonal_lattice_constants_against_hand_counts(re, shells) -> None:
+    l0 = 0.005
+    n0, lam, count = by_hand(shells, re)
+    ref = lattice_reference(2, l0, re, "hexagonal")
+    assert ref.count == count
+    assert ref.n0 == pytest.approx(n0, rel=1e-12)
+    assert ref.lambda_ == pytest.approx(lam * l0**2, rel=1e-12)
+    # 6 (re/1 - 1) + 6 (re/sqrt(3) - 1) + 6 (re/2 - 1) at r_e = 2.1 l0
+    assert lattice_reference(2, l0, 2.1, "hexagonal").n0 == pytest.approx(8.174613391789288)
+
+
+def test_hexagonal_lattice_is_two_dimensional() -> None:
+    with pytest.raises(ValueError, match="2-D only"):
+        MPSParameters(dim=3, l0=0.01, lattice="hexagonal")
+    with pytest.raises(ValueError, match="2-D only"):
+        tank(0.04, 0.03, 0.01, dim=3, inner_depth=0.02, lattice="hexagonal")
 
 
 def test_solver_constants_use_the_lattice() -> None:
@@ -203,6 +228,36 @@ def test_tank_geometry() -> None:
     positions3, kinds3 = tank(0.04, 0.03, l0, dim=3, inner_depth=0.02)
     assert positions3.shape == (10 * 8 * 6 - 4 * 2 * 3, 3)
     assert water_block(0, 0.04, 0, 0.02, l0, 0, 0.03).shape == (24, 3)
+
+
+def test_hexagonal_tank_geometry() -> None:
+    """The hexagonal tank and its water are one lattice: every particle's nearest neighbour is
+    l0 away, each row holds width / l0 fluid particles (pairs of rows centred), the walls are
+    the sites at most l0 behind the side faces and one row under the floor, and walls with dummies
+    complete the neighbourhood of every fluid particle away from the free surface (n = n0)."""
+    l0 = 0.005
+    width, depth = 0.2, 0.1
+    row = math.sqrt(3.0) / 2.0 * l0
+    walls, kinds = tank(width, 0.15, l0, lattice="hexagonal")
+    fluid = water_block(0.0, width, 0.0, depth, l0, lattice="hexagonal")
+    assert filled_height(depth, l0, "hexagonal") == pytest.approx(23 * row)
+    assert fluid.shape == (40 * 23, 2)  # 40 a row (width / l0), round(0.1 / row) = 23 rows
+    assert fluid[:, 0].min() > 0 and fluid[:, 0].max() < width and fluid[:, 1].max() < depth
+    everything = np.vstack([fluid, walls])
+    distance = np.sqrt(((everything[:, None] - everything[None]) ** 2).sum(-1))
+    np.fill_diagonal(distance, np.inf)
+    np.testing.assert_allclose(distance.min(axis=1), l0, rtol=1e-12)
+    rows = np.rint(fluid[:, 1] / row - 0.5).astype(int)
+    assert np.array_equal(np.bincount(rows), np.full(23, 40))
+    for j in range(23):  # rows alternately l0 / 4 left and right of the middle
+        assert fluid[rows == j, 0].mean() == pytest.approx(0.5 * width + (j % 2 - 0.5) * 0.5 * l0)
+    behind = np.maximum(np.maximum(-walls[:, 0], walls[:, 0] - width), -walls[:, 1])
+    assert np.all((behind[kinds == WALL] > 0) & (behind[kinds == WALL] <= l0))
+    assert np.all(behind[kinds == DUMMY] > l0)
+    # number density of the fluid particles at r_e = 2.1 l0
+    n = np.where(distance < 2.1 * l0, 2.1 * l0 / distance - 1.0, 0.0).sum(axis=1)[: len(fluid)]
+    inside = fluid[:, 1] < depth - 2.5 * l0
+    np.testing.assert_allclose(n[inside], lattice_reference(2, l0, 2.1, "hexagonal").n0)
 
 
 def _gradient_acceleration(

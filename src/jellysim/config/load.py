@@ -284,6 +284,11 @@ def _check_fluid(scene: Scene) -> None:
             "fluid.source = 'mixed' needs fluid.gradient = 'corrected': with the standard "
             "gradient the mixed source is unstable (docs/fluid.md)"
         )
+    if f.lattice == "hexagonal" and f.dimensions != 2:
+        raise InputError(
+            "fluid.lattice = 'hexagonal' is 2-D only: set fluid.dimensions = 2 or "
+            "fluid.lattice = 'square'"
+        )
     lengths = ["tank_width", "tank_height", "water_height"]
     if f.geometry == "dam-break":
         lengths.append("water_width")

@@ -287,8 +287,21 @@ class Fluid:
         choices=("standard",),
         doc="free-surface detection: n < beta n0 (Koshizuka & Oka 1996)",
     )
-    surface_threshold: float = param(
-        0.97, gt=0.5, lt=1.0, doc="beta: a particle with n < beta n0 is on the free surface"
+    surface_threshold: float | None = param(
+        None,
+        gt=0.5,
+        lt=1.0,
+        nullable=True,
+        doc="beta: a particle with n < beta n0 is on the free surface (default: 0.97 on the "
+        "square lattice, 0.93 on the hexagonal one, whose second row has n = 0.962 n0)",
+    )
+    lattice: str = param(
+        "square",
+        kind="choice",
+        choices=("square", "hexagonal"),
+        doc="initial arrangement of the particles: 'square' (cubic in 3-D), or 'hexagonal' "
+        "(2-D fluid-only scenes): rows sqrt(3)/2 spacing apart, each particle with six "
+        "neighbours at one spacing; still water stays still on it (docs/fluid.md)",
     )
     solver: str = param(
         "iccg",

@@ -1,4 +1,5 @@
-"""Initial particle arrangements for MPS on a square (2-D) or cubic (3-D) lattice of spacing l0.
+"""Initial particle arrangements for MPS on a square (2-D) or cubic (3-D) lattice of spacing l0,
+or on the hexagonal (triangular) lattice of spacing l0 in 2-D.
 
 Cell-centred convention: space is cut into cells of side l0 with faces on the planes ``i l0``, and
 every particle sits at a cell centre ``(i + 1/2) l0``, standing for that cell's volume. The inner
@@ -8,6 +9,17 @@ outside those faces (the first wall layer is centred half a spacing behind the f
 particles the cells beyond. A water block ``[x0, x1]`` takes the cells whose centres lie inside
 it: a block of width ``a`` from a wall holds ``a / l0`` particles across, its water fills exactly
 ``[0, a]``, and it never overlaps a wall.
+
+Hexagonal lattice (``lattice="hexagonal"``, 2-D): horizontal rows ``h = (sqrt(3)/2) l0`` apart,
+row j centred at ``y = (j + 1/2) h``, its particles at ``x = (i + 1/4) l0`` (j even) or
+``(i + 3/4) l0`` (j odd), so that every particle has six neighbours at l0 and each row of a
+tank whose width is a whole number of l0 holds width / l0 particles, l0 / 4 left (j even) or
+right (j odd) of the middle. Side walls and
+dummies are the lattice's own sites behind the faces (the wall is a zigzag of amplitude l0 / 2:
+a site 0 < d <= l0 behind a side face is a wall, the next 2 l0 dummies; behind the floor one row
+of walls and two of dummies). A block of width ``a`` again holds ``a / l0`` particles a row and
+a height ``H`` the ``round(H / h)`` rows whose centres lie below it (:func:`filled_height`).
+Why this lattice: docs/theory/fluid.md, "The lattice".
 """
 
 from __future__ import annotations
@@ -15,6 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 FLUID, WALL, DUMMY = 0, 1, 2  # particle kinds (stored as int8)
+LATTICES = ("square", "hexagonal")
+ROW_HEIGHT = {"square": 1.0, "hexagonal": 0.5 * np.sqrt(3.0)}  # row spacing over l0
 
 _TOLERANCE = 1e-9  # in l0: cell centres on a block's boundary count as inside
 
@@ -34,6 +48,7 @@ def tank(
     inner_depth: float | None = None,
     wall_layers: int = 1,
     dummy_layers: int = 2,
+    lattice: str = "square",
 ) -> tuple[np.ndarray, np.ndarray]:
     """An open-top tank: ``(positions (N, dim) m float64, kinds (N,) int8)``.
 
@@ -41,9 +56,12 @@ def tank(
     particles the next ``dummy_layers`` layers. Corners are filled. The side walls rise from the
     floor to ``inner_height`` (their top cell's centre is half a spacing below it). ``inner_width``,
     ``inner_height`` (and ``inner_depth`` in 3-D) must be whole multiples of l0.
+    ``lattice``: "square" (cubic in 3-D) or "hexagonal" (2-D only; the module's docstring).
     """
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, not {dim}")
+    if _hexagonal(lattice, dim):
+        return _hexagonal_tank(inner_width, inner_height, l0, wall_layers, dummy_layers)
     layers = wall_layers + dummy_layers
     horizontal = [_cells(inner_width, l0)]
     if dim == 3:
@@ -72,10 +90,13 @@ def water_block(
     l0: float,
     z0: float | None = None,
     z1: float | None = None,
+    lattice: str = "square",
 ) -> np.ndarray:
     """Fluid positions ``(N, dim)`` m: the cell centres ``(i + 1/2) l0`` inside the box
     ``[x0, x1] x [y0, y1]`` (``x [z0, z1]`` in 3-D, when z0 and z1 are given). The last
-    coordinate is up."""
+    coordinate is up. On the ``"hexagonal"`` lattice (2-D only), its sites inside the box."""
+    if _hexagonal(lattice, 2 if z0 is None or z1 is None else 3):
+        return _hexagonal_block(x0, x1, y0, y1, l0)
     bounds = [(x0, x1), (y0, y1)]
     if z0 is not None and z1 is not None:
         bounds.append((z0, z1))
@@ -86,3 +107,62 @@ def water_block(
         axes.append(np.arange(first, last + 1))
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(bounds))
     return (grid.astype(np.float64) + 0.5) * l0
+
+
+def filled_height(height: float, l0: float, lattice: str = "square") -> float:
+    """The height (m) that a block from the floor to ``height`` fills on the lattice: its rows
+    (those whose centres lie below ``height``) times the row spacing. ``height`` itself on the
+    square lattice when it is a whole number of l0."""
+    row = ROW_HEIGHT[lattice] * l0
+    return _rows_below(height, row) * row
+
+
+def _hexagonal(lattice: str, dim: int) -> bool:
+    if lattice not in LATTICES:
+        raise ValueError(f"lattice = {lattice!r}; allowed: {', '.join(LATTICES)}")
+    if lattice == "hexagonal" and dim != 2:
+        raise ValueError("the hexagonal lattice is 2-D only")
+    return lattice == "hexagonal"
+
+
+def _rows_below(height: float, row: float) -> int:
+    """The number of rows j >= 0 centred at (j + 1/2) row at or below ``height``."""
+    return max(0, int(np.floor(height / row - 0.5 + _TOLERANCE)) + 1)
+
+
+def _hexagonal_sites(columns: tuple[int, int], rows: tuple[int, int], l0: float) -> np.ndarray:
+    """Sites (i, j) of the hexagonal lattice for i, j in the half-open ranges, as (N, 2) m."""
+    grid_i, grid_j = np.meshgrid(np.arange(*columns), np.arange(*rows), indexing="ij")
+    i, j = grid_i.ravel(), grid_j.ravel()
+    x = (i + np.where(j % 2 == 0, 0.25, 0.75)) * l0
+    y = (j + 0.5) * (ROW_HEIGHT["hexagonal"] * l0)
+    return np.column_stack([x, y])
+
+
+def _hexagonal_tank(
+    inner_width: float, inner_height: float, l0: float, wall_layers: int, dummy_layers: int
+) -> tuple[np.ndarray, np.ndarray]:
+    layers = wall_layers + dummy_layers
+    n = _cells(inner_width, l0)
+    top = _rows_below(inner_height, ROW_HEIGHT["hexagonal"] * l0)
+    sites = _hexagonal_sites((-layers - 1, n + layers + 1), (-layers, top), l0)
+    x = sites[:, 0] / l0
+    j = np.rint(sites[:, 1] / (ROW_HEIGHT["hexagonal"] * l0) - 0.5).astype(np.int64)
+    behind_side = np.maximum(-x, x - n)  # l0 behind the nearer side face (< 0: inside)
+    layer = np.where(behind_side > 0.0, np.floor(behind_side), -1)
+    layer = np.maximum(layer, -j - 1)  # rows below the floor
+    keep = (layer >= 0) & (layer < layers)
+    kinds = np.where(layer[keep] < wall_layers, WALL, DUMMY).astype(np.int8)
+    return sites[keep], kinds
+
+
+def _hexagonal_block(x0: float, x1: float, y0: float, y1: float, l0: float) -> np.ndarray:
+    row = ROW_HEIGHT["hexagonal"] * l0
+    first_row = int(np.ceil(y0 / row - 0.5 - _TOLERANCE))
+    last_row = int(np.floor(y1 / row - 0.5 + _TOLERANCE))
+    first = int(np.floor(x0 / l0)) - 1
+    last = int(np.ceil(x1 / l0)) + 1
+    sites = _hexagonal_sites((first, last + 1), (first_row, last_row + 1), l0)
+    x = sites[:, 0]
+    inside = (x >= x0 - _TOLERANCE * l0) & (x <= x1 + _TOLERANCE * l0)
+    return sites[inside]

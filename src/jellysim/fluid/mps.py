@@ -30,7 +30,7 @@ import numpy as np
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid import kernels
 from jellysim.fluid.deflation import deflated_cg
-from jellysim.fluid.geometry import DUMMY, FLUID, WALL
+from jellysim.fluid.geometry import DUMMY, FLUID, LATTICES, ROW_HEIGHT, WALL
 
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count")
@@ -94,6 +94,9 @@ class MPSParameters:
       height (:meth:`MPSSolver.stable_dt`).
     - ``acceleration_number`` kappa: the acceleration limit ``dt <= kappa sqrt(l0 / a)``, i.e. a
       particle at rest moves ``kappa^2 l0 / 2`` in a step; None: ``sqrt(courant)``.
+    - ``lattice``: the initial arrangement whose neighbourhood defines n0 and lambda (Eq.
+      F2-F3): "square" (cubic in 3-D) or "hexagonal" (2-D only,
+      :mod:`jellysim.fluid.geometry`). The particles must be built on the same lattice.
     - ``domain_min``/``domain_max`` (m): particles leaving the box die (``alive`` False). None:
       the initial particles' bounding box widened by its own size on every side.
     """
@@ -124,6 +127,7 @@ class MPSParameters:
     acceleration_number: float | None = None
     diffusion_number: float = 0.2
     compressibility: float = 0.45e-9
+    lattice: str = "square"
     domain_min: tuple[float, ...] | None = None
     domain_max: tuple[float, ...] | None = None
 
@@ -135,9 +139,12 @@ class MPSParameters:
             ("surface", self.surface, SURFACES),
             ("gradient", self.gradient, GRADIENTS),
             ("solver", self.solver, SOLVERS),
+            ("lattice", self.lattice, LATTICES),
         ):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
+        if self.lattice == "hexagonal" and self.dim != 2:
+            raise ValueError("the hexagonal lattice is 2-D only")
         if self.acceleration_number is not None and not self.acceleration_number > 0.0:
             raise ValueError(f"acceleration_number must be > 0, not {self.acceleration_number}")
         if self.gravity is not None and len(self.gravity) != self.dim:
@@ -172,14 +179,24 @@ class LatticeReference:
     count: int
 
 
-def lattice_reference(dim: int, l0: float, re: float) -> LatticeReference:
-    """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the square/cubic lattice points
-    ``r_j = l0 m`` (integer m != 0) with ``|r_j| < re l0``."""
-    reach = int(math.ceil(re))
+def lattice_reference(
+    dim: int, l0: float, re: float, lattice: str = "square"
+) -> LatticeReference:
+    """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the lattice points r_j != 0 with
+    ``|r_j| < re l0``: on the square/cubic lattice ``r_j = l0 m`` (integer m), on the hexagonal
+    one (2-D) ``r_j = l0 (m_1 + m_2 / 2, m_2 sqrt(3) / 2)``."""
+    # m_1 reaches |m_1 + m_2 / 2| + |m_2| / 2 on the hexagonal lattice
+    reach = int(math.ceil(re)) if lattice == "square" else int(math.ceil(2.0 * re)) + 1
     axis = np.arange(-reach, reach + 1)
     offsets = np.stack(np.meshgrid(*([axis] * dim), indexing="ij"), axis=-1).reshape(-1, dim)
-    r = np.sqrt((offsets.astype(np.float64) ** 2).sum(axis=1)) * l0
-    r = r[(r > 0) & (r < re * l0)]
+    offsets = offsets.astype(np.float64)
+    if lattice == "hexagonal":
+        offsets = np.column_stack(
+            [offsets[:, 0] + 0.5 * offsets[:, 1], ROW_HEIGHT["hexagonal"] * offsets[:, 1]]
+        )
+    norm = np.sqrt((offsets**2).sum(axis=1))  # in l0
+    # points on the sphere r = re (4 l0 on both lattices) are outside, whatever the round-off
+    r = norm[(norm > 0) & (norm < re - 1e-9)] * l0
     w = re * l0 / r - 1.0
     return LatticeReference(float(w.sum()), float((w * r * r).sum() / w.sum()), int(r.size))
 
@@ -233,9 +250,10 @@ class MPSSolver:
         self.params = params
         l0 = params.l0
         dim = params.dim
-        number_density = lattice_reference(dim, l0, params.re_number_density)
-        gradient = lattice_reference(dim, l0, params.re_gradient)
-        laplacian = lattice_reference(dim, l0, params.laplacian_radius)
+        lattice = params.lattice
+        number_density = lattice_reference(dim, l0, params.re_number_density, lattice)
+        gradient = lattice_reference(dim, l0, params.re_gradient, lattice)
+        laplacian = lattice_reference(dim, l0, params.laplacian_radius, lattice)
         self.reference = {
             "number_density": number_density,
             "gradient": gradient,
