@@ -72,6 +72,41 @@ def test_hexagonal_lattice_constants_against_hand_counts(re, shells) -> None:
     assert lattice_reference(2, l0, 2.1, "hexagonal").n0 == pytest.approx(8.174613391789288)
 
 
+def least_stiffness(lattice: str, re: float) -> float:
+    """The least eigenvalue (in K / l0^2) of the dynamical matrix of the minimum-pressure
+    gradient's pair repulsion F = K w(r) / r on a 2-D lattice, over a grid of wave vectors
+    (docs/theory/fluid.md, "The lattice"): negative, the lattice is unstable."""
+    reach = int(math.ceil(2 * re)) + 1
+    m1, m2 = np.meshgrid(np.arange(-reach, reach + 1), np.arange(-reach, reach + 1))
+    m1, m2 = m1.ravel().astype(float), m2.ravel().astype(float)
+    if lattice == "hexagonal":
+        points = np.column_stack([m1 + 0.5 * m2, math.sqrt(3.0) / 2.0 * m2])
+    else:
+        points = np.column_stack([m1, m2])
+    r = np.sqrt((points**2).sum(axis=1))
+    points, r = points[(r > 0) & (r < re)], r[(r > 0) & (r < re)]
+    unit = points / r[:, None]
+    force = (re / r - 1.0) / r
+    slope = -2.0 * re / r**3 + 1.0 / r**2
+    outer = unit[:, :, None] * unit[:, None, :]
+    pair = -slope[:, None, None] * outer - (force / r)[:, None, None] * (np.eye(2) - outer)
+    k = np.linspace(-2 * np.pi, 2 * np.pi, 41)
+    waves = np.stack(np.meshgrid(k, k), axis=-1).reshape(-1, 2)
+    weights = 1.0 - np.cos(waves @ points.T)  # (K, P)
+    matrices = np.einsum("kp,pab->kab", weights, pair)
+    return float(np.linalg.eigvalsh(matrices)[:, 0].min())
+
+
+def test_lattice_stability_of_the_repulsion() -> None:
+    """The square lattice held by the minimum-pressure gradient's repulsion is unstable to
+    columns sliding past each other (least eigenvalue -1.43 K/l0^2 at r_e = 2.1 l0, at
+    k = (pi/l0, 0)); the hexagonal lattice is stable at every radius (docs/theory/fluid.md)."""
+    assert least_stiffness("square", 2.1) == pytest.approx(-1.4302, abs=1e-3)
+    assert least_stiffness("square", 3.1) < -1.0
+    for re in (1.5, 2.1, 2.5, 3.1, 4.0):
+        assert least_stiffness("hexagonal", re) > -1e-9
+
+
 def test_hexagonal_lattice_is_two_dimensional() -> None:
     with pytest.raises(ValueError, match="2-D only"):
         MPSParameters(dim=3, l0=0.01, lattice="hexagonal")
