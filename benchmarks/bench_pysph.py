@@ -2,14 +2,17 @@
 
     .venv/bin/python benchmarks/bench_pysph.py [--per-width 40 ...] [--threads 2]
         [--scheme wcsph ...] [--no-mps | --no-pysph] [--solver iccg|deflated]
-        [--pysph .venv-pysph/bin/python]
+        [--pysph .venv-pysph/bin/python] [--set KEY=VALUE ...]
     # --pysph: the venv of benchmarks/pysph_env.sh
 
 Martin & Moyce's n^2 = 2 column (width a, height 2a) collapsing, at N particles across a, to
 T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after the other:
 
-- jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank) at fluid.spacing = a / N (and the
-  pressure solver ``--solver``, the preset's ICCG by default), stepped by the solver at its own
+- jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank; since 2026-11-24 the hexagonal
+  lattice with the mixed source and the corrected gradient, ``--set fluid.lattice=square --set
+  fluid.source=standard --set fluid.gradient=standard`` for the paper's scheme) at
+  fluid.spacing = a / N (and the pressure solver ``--solver``, the preset's ICCG by default),
+  stepped by the solver at its own
   stable dt; the surge front recorded after every step.
 - PySPH: its example dam_break_2d (a = 1 m, a 4a tank, WCSPH with its adaptive step) at
   dx = a / N, run in PySPH's own venv by benchmarks/pysph_dam_break.py; the front at 200
@@ -46,10 +49,15 @@ HERE = Path(__file__).resolve().parent
 UNTIL = 3.3
 
 
-def run_mps(per_width: int, solver_name: str | None = None) -> dict[str, object]:
+def run_mps(
+    per_width: int, solver_name: str | None = None, sets: list[str] | None = None
+) -> dict[str, object]:
     overrides: dict[str, object] = {"fluid.spacing": 0.1 / per_width}
     if solver_name:
         overrides["fluid.solver"] = solver_name
+    for item in sets or []:
+        key, _, value = item.partition("=")
+        overrides[key] = value
     scene = jellysim.load_scene("dam-break-2d", overrides)
     solver = FluidSimulation(scene).solver
     a = scene.fluid.water_width
@@ -120,6 +128,10 @@ def main() -> None:
     parser.add_argument("--no-pysph", action="store_true", help="run jellysim only")
     parser.add_argument("--solver", choices=("iccg", "cg", "deflated"), help="MPS PPE solver")
     parser.add_argument("--pysph", default=str(HERE.parent / ".venv-pysph" / "bin" / "python"))
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE",
+        help="a scene override for jellysim (text keys), e.g. fluid.lattice=square",
+    )  # fmt: skip
     args = parser.parse_args()
     if not args.no_pysph and not Path(args.pysph).exists():
         sys.exit(f"no PySPH Python at {args.pysph}: build it with benchmarks/pysph_env.sh")
@@ -134,7 +146,7 @@ def main() -> None:
     for per_width in args.per_width or [40]:
         if not args.no_mps:
             name = f"jellysim MPS ({args.solver or 'iccg'}), {per_width}"
-            print(describe(name, run_mps(per_width, args.solver)), flush=True)
+            print(describe(name, run_mps(per_width, args.solver, args.set)), flush=True)
         for scheme in [] if args.no_pysph else args.scheme or ["wcsph"]:
             run = run_pysph(args.pysph, per_width, args.threads, scheme)
             print(describe(f"PySPH {scheme.upper()}, {per_width}", run), flush=True)

@@ -258,7 +258,7 @@ def test_mixed_source_without_the_corrected_gradient_is_refused(tmp_path: Path) 
     anything is written, naming the key to set."""
     check_subprocess(
         tmp_path,
-        ("run", "dam-break-2d", "--set", "fluid.source=mixed"),
+        ("run", "dam-break-2d", "--set", "fluid.gradient=standard"),
         ("fluid.source = 'mixed'", "fluid.gradient = 'corrected'"),
     )
 

@@ -115,7 +115,10 @@ class SoftBellSimulation:
         self.bell.step_force(
             probe.position[rows], probe.velocity[rows], 0.0, 1e-3, self._bell_force.copy()
         )
-        probe.step(min(probe.stable_dt(), 1e-6), self._force)
+        try:
+            probe.step(min(probe.stable_dt(), 1e-6), self._force)
+        except FluidDiverged:
+            pass  # compiled all the same; a real step that diverges is reported with its time
         if self.tentacles is not None:
             self.tentacles.prepare()
 
