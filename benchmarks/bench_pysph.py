@@ -41,6 +41,7 @@ import numba
 import numpy as np
 
 import jellysim
+from jellysim.config.load import parse_override
 from jellysim.fluid.geometry import FLUID
 from jellysim.reference import front_errors, surge_front
 from jellysim.simulation.fluid import FluidSimulation
@@ -56,7 +57,7 @@ def run_mps(
     if solver_name:
         overrides["fluid.solver"] = solver_name
     for item in sets or []:
-        key, _, value = item.partition("=")
+        key, value = parse_override(item)
         overrides[key] = value
     scene = jellysim.load_scene("dam-break-2d", overrides)
     solver = FluidSimulation(scene).solver
@@ -130,7 +131,7 @@ def main() -> None:
     parser.add_argument("--pysph", default=str(HERE.parent / ".venv-pysph" / "bin" / "python"))
     parser.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE",
-        help="a scene override for jellysim (text keys), e.g. fluid.lattice=square",
+        help="a scene override for jellysim, e.g. fluid.lattice=square",
     )  # fmt: skip
     args = parser.parse_args()
     if not args.no_pysph and not Path(args.pysph).exists():

@@ -143,7 +143,7 @@ def test_scheme_keys_reach_the_solver() -> None:
 
     still = mps_parameters(jellysim.load_scene("hydrostatic-2d"))
     assert (still.source, still.gradient, still.lattice) == ("mixed", "corrected", "hexagonal")
-    assert still.surface_threshold == 0.93
+    assert still.beta == 0.93  # the hexagonal lattice's default
     dam = mps_parameters(jellysim.load_scene("dam-break-2d"))
     assert (dam.source, dam.gradient, dam.lattice) == ("mixed", "corrected", "hexagonal")
     paper = mps_parameters(
@@ -153,9 +153,9 @@ def test_scheme_keys_reach_the_solver() -> None:
         )
     )
     assert (paper.source, paper.gradient, paper.lattice) == ("standard", "standard", "square")
-    assert paper.surface_threshold == 0.97
+    assert paper.beta == 0.97
     set_beta = jellysim.load_scene("hydrostatic-2d", {"fluid.surface_threshold": 0.95})
-    assert mps_parameters(set_beta).surface_threshold == 0.95
+    assert mps_parameters(set_beta).beta == 0.95
     chosen = mps_parameters(
         jellysim.load_scene(
             "dam-break-2d", {"fluid.source": "mixed", "fluid.gradient": "corrected"}

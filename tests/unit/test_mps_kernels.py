@@ -102,7 +102,8 @@ def test_lattice_stability_of_the_repulsion() -> None:
     columns sliding past each other (least eigenvalue -1.43 K/l0^2 at r_e = 2.1 l0, at
     k = (pi/l0, 0)); the hexagonal lattice is stable at every radius (docs/theory/fluid.md)."""
     assert least_stiffness("square", 2.1) == pytest.approx(-1.4302, abs=1e-3)
-    assert least_stiffness("square", 3.1) < -1.0
+    assert least_stiffness("square", 2.5) == pytest.approx(-0.920, abs=2e-3)
+    assert least_stiffness("square", 3.1) == pytest.approx(-1.885, abs=2e-3)
     for re in (1.5, 2.1, 2.5, 3.1, 4.0):
         assert least_stiffness("hexagonal", re) > -1e-9
 
@@ -110,6 +111,18 @@ def test_lattice_stability_of_the_repulsion() -> None:
 def test_hexagonal_lattice_is_two_dimensional() -> None:
     with pytest.raises(ValueError, match="2-D only"):
         MPSParameters(dim=3, l0=0.01, lattice="hexagonal")
+    with pytest.raises(ValueError, match="2-D only"):
+        lattice_reference(3, 0.01, 2.1, "hexagonal")
+    with pytest.raises(ValueError, match="allowed"):
+        lattice_reference(2, 0.01, 2.1, "triangular")
+    with pytest.raises(ValueError, match="square lattice"):
+        MPSParameters(dim=2, l0=0.01, lattice="hexagonal", surface="neighbour-count")
+
+
+def test_surface_threshold_defaults_to_the_lattice() -> None:
+    assert MPSParameters(dim=2, l0=0.01).beta == 0.97
+    assert MPSParameters(dim=2, l0=0.01, lattice="hexagonal").beta == 0.93
+    assert MPSParameters(dim=2, l0=0.01, lattice="hexagonal", surface_threshold=0.9).beta == 0.9
     with pytest.raises(ValueError, match="2-D only"):
         tank(0.04, 0.03, 0.01, dim=3, inner_depth=0.02, lattice="hexagonal")
 
@@ -291,8 +304,16 @@ def test_hexagonal_tank_geometry() -> None:
     assert np.all(behind[kinds == DUMMY] > l0)
     # number density of the fluid particles at r_e = 2.1 l0
     n = np.where(distance < 2.1 * l0, 2.1 * l0 / distance - 1.0, 0.0).sum(axis=1)[: len(fluid)]
+    n0 = lattice_reference(2, l0, 2.1, "hexagonal").n0
     inside = fluid[:, 1] < depth - 2.5 * l0
-    np.testing.assert_allclose(n[inside], lattice_reference(2, l0, 2.1, "hexagonal").n0)
+    np.testing.assert_allclose(n[inside], n0)
+    # The surface threshold 0.93 splits the top two rows away from the side walls: the top row
+    # misses four neighbours within 2.1 l0 (0.641 n0), the second row three (0.962 n0, above
+    # 0.93 but under the square lattice's 0.97).
+    middle = np.abs(fluid[:, 0] - 0.5 * width) < 0.25 * width
+    top, second = fluid[:, 1] > depth - row, np.abs(fluid[:, 1] - (depth - 1.5 * row)) < 0.1 * row
+    np.testing.assert_allclose(n[top & middle] / n0, 0.6407, atol=1e-4)
+    np.testing.assert_allclose(n[second & middle] / n0, 0.9618, atol=1e-4)
 
 
 def _gradient_acceleration(

@@ -301,7 +301,7 @@ class Fluid:
         choices=("square", "hexagonal"),
         doc="initial arrangement of the particles: 'square' (cubic in 3-D), or 'hexagonal' "
         "(2-D fluid-only scenes): rows sqrt(3)/2 spacing apart, each particle with six "
-        "neighbours at one spacing; still water stays still on it (docs/fluid.md)",
+        "neighbours at one spacing; still water stays nearly still on it (docs/fluid.md)",
     )
     solver: str = param(
         "iccg",

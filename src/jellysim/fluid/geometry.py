@@ -12,13 +12,14 @@ it: a block of width ``a`` from a wall holds ``a / l0`` particles across, its wa
 
 Hexagonal lattice (``lattice="hexagonal"``, 2-D): horizontal rows ``h = (sqrt(3)/2) l0`` apart,
 row j centred at ``y = (j + 1/2) h``, its particles at ``x = (i + 1/4) l0`` (j even) or
-``(i + 3/4) l0`` (j odd), so that every particle has six neighbours at l0 and each row of a
-tank whose width is a whole number of l0 holds width / l0 particles, l0 / 4 left (j even) or
-right (j odd) of the middle. Side walls and
-dummies are the lattice's own sites behind the faces (the wall is a zigzag of amplitude l0 / 2:
-a site 0 < d <= l0 behind a side face is a wall, the next 2 l0 dummies; behind the floor one row
-of walls and two of dummies). A block of width ``a`` again holds ``a / l0`` particles a row and
-a height ``H`` the ``round(H / h)`` rows whose centres lie below it (:func:`filled_height`).
+``(i + 3/4) l0`` (j odd), so that every particle has six neighbours at l0 and each row of a tank
+whose width is a whole number of l0 holds width / l0 particles, l0 / 4 left (j even) or right
+(j odd) of the middle. Side walls and dummies are the lattice's own sites behind the faces (the
+wall is a zigzag of amplitude l0 / 2: a site less than l0 behind a side face is a wall, the next
+2 l0 dummies; behind the floor one row of walls and two of dummies). A block of width ``a``
+again holds ``a / l0`` particles a row and a height ``H`` the ``round(H / h)`` rows whose
+centres lie below it (:func:`filled_height`), for blocks whose sides are whole numbers of l0
+from the walls (as in every scene).
 Why this lattice: docs/theory/fluid.md, "The lattice".
 """
 
@@ -55,7 +56,8 @@ def tank(
     Wall particles fill the ``wall_layers`` layers of cells outside the inner faces, dummy
     particles the next ``dummy_layers`` layers. Corners are filled. The side walls rise from the
     floor to ``inner_height`` (their top cell's centre is half a spacing below it). ``inner_width``,
-    ``inner_height`` (and ``inner_depth`` in 3-D) must be whole multiples of l0.
+    ``inner_height`` (and ``inner_depth`` in 3-D) must be whole multiples of l0 (on the hexagonal
+    lattice the walls rise to the last row centred below ``inner_height``, which is not checked).
     ``lattice``: "square" (cubic in 3-D) or "hexagonal" (2-D only; the module's docstring).
     """
     if dim not in (2, 3):
@@ -111,8 +113,10 @@ def water_block(
 
 def filled_height(height: float, l0: float, lattice: str = "square") -> float:
     """The height (m) that a block from the floor to ``height`` fills on the lattice: its rows
-    (those whose centres lie below ``height``) times the row spacing. ``height`` itself on the
-    square lattice when it is a whole number of l0."""
+    (those whose centres lie below ``height``) times the row spacing; on the square lattice
+    ``height`` itself (a whole number of l0, checked by the scene)."""
+    if not _hexagonal(lattice, 2):
+        return height
     row = ROW_HEIGHT[lattice] * l0
     return _rows_below(height, row) * row
 

@@ -36,6 +36,12 @@ SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count")
 SOLVERS = ("iccg", "cg", "deflated")
 GRADIENTS = ("standard", "corrected")
+# beta of the surface criterion n < beta n0 when none is given, per lattice. 0.97 is Koshizuka &
+# Oka's for the square lattice, whose second row under a flat surface has n = 0.992 n0 (it misses
+# the neighbour two spacings up). On the hexagonal lattice the second row misses three (one at
+# sqrt(3) l0, two at 2 l0): n = 0.962 n0, under 0.97, so that row would flicker between the
+# surface and the interior; 0.93 leaves it 3 % of margin, the surface row (0.64 n0) far below.
+SURFACE_THRESHOLD = {"square": 0.97, "hexagonal": 0.93}
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
 # PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
@@ -109,7 +115,7 @@ class MPSParameters:
     re_number_density: float = 2.1
     re_gradient: float = 2.1
     re_laplacian: float | None = None  # None: 4.0 in 2-D, 3.1 in 3-D
-    surface_threshold: float = 0.97
+    surface_threshold: float | None = None  # None: SURFACE_THRESHOLD of the lattice
     surface_neighbour_threshold: float = 0.85
     collision_distance: float = 0.5
     collision_restitution: float = 0.2
@@ -145,10 +151,21 @@ class MPSParameters:
                 raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
         if self.lattice == "hexagonal" and self.dim != 2:
             raise ValueError("the hexagonal lattice is 2-D only")
+        if self.lattice == "hexagonal" and self.surface == "neighbour-count":
+            # its threshold counts the square lattice's neighbours (the second row of the
+            # hexagonal one has 15 of 18, under 0.85 N0, and would always be on the surface)
+            raise ValueError("surface = 'neighbour-count' needs the square lattice")
         if self.acceleration_number is not None and not self.acceleration_number > 0.0:
             raise ValueError(f"acceleration_number must be > 0, not {self.acceleration_number}")
         if self.gravity is not None and len(self.gravity) != self.dim:
             raise ValueError(f"gravity needs {self.dim} components, not {len(self.gravity)}")
+
+    @property
+    def beta(self) -> float:
+        """The surface threshold in use: ``surface_threshold``, or the lattice's default."""
+        if self.surface_threshold is not None:
+            return self.surface_threshold
+        return SURFACE_THRESHOLD[self.lattice]
 
     @property
     def laplacian_radius(self) -> float:
@@ -185,6 +202,10 @@ def lattice_reference(
     """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the lattice points r_j != 0 with
     ``|r_j| < re l0``: on the square/cubic lattice ``r_j = l0 m`` (integer m), on the hexagonal
     one (2-D) ``r_j = l0 (m_1 + m_2 / 2, m_2 sqrt(3) / 2)``."""
+    if lattice not in LATTICES:
+        raise ValueError(f"lattice = {lattice!r}; allowed: {', '.join(LATTICES)}")
+    if lattice == "hexagonal" and dim != 2:
+        raise ValueError("the hexagonal lattice is 2-D only")
     # m_1 reaches |m_1 + m_2 / 2| + |m_2| / 2 on the hexagonal lattice
     reach = int(math.ceil(re)) if lattice == "square" else int(math.ceil(2.0 * re)) + 1
     axis = np.arange(-reach, reach + 1)
@@ -578,7 +599,7 @@ class MPSSolver:
         )
         if clock is not None:
             clock("neighbours")
-        surface = self.number_density < p.surface_threshold * c.n0
+        surface = self.number_density < p.beta * c.n0
         if p.surface == "neighbour-count":
             count0 = self.reference["number_density"].count
             surface |= self._neighbour_count < p.surface_neighbour_threshold * count0

@@ -53,20 +53,6 @@ def fluid_particles(scene: Scene) -> tuple[np.ndarray, np.ndarray, dict[str, flo
     return positions, all_kinds, attributes
 
 
-SURFACE_THRESHOLD = {"square": 0.97, "hexagonal": 0.93}
-
-
-def surface_threshold(value: float | None, lattice: str) -> float:
-    """beta of the free-surface criterion n < beta n0: the scene's, or the lattice's default.
-
-    0.97 is Koshizuka & Oka's value for the square lattice, whose second row from a flat surface
-    misses only the neighbours two spacings up (n = 0.992 n0 at r_e = 2.1 l0). On the hexagonal
-    lattice the second row misses three (one at sqrt(3) l0, two at 2 l0): n = 0.962 n0, under
-    0.97, so that row would flicker between the surface and the interior; 0.93 leaves it 3 %
-    of margin while the surface row itself (n = 0.64 n0) stays well under it."""
-    return SURFACE_THRESHOLD[lattice] if value is None else value
-
-
 def mps_parameters(scene: Scene) -> MPSParameters:
     f, w = scene.fluid, scene.water
     return MPSParameters(
@@ -78,7 +64,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         source=f.source,
         surface=f.surface,
         gradient=f.gradient,
-        surface_threshold=surface_threshold(f.surface_threshold, f.lattice),
+        surface_threshold=f.surface_threshold,
         lattice=f.lattice,
         solver=f.solver,
         coarse_cell=f.coarse_cell,
@@ -119,7 +105,7 @@ class FluidSimulation:
         try:
             probe.step(min(probe.stable_dt(), 1e-6))
         except FluidDiverged:
-            pass  # compiled all the same; a real step that diverges is reported with its time
+            pass  # the first real step reports it, with its time; it compiles what is left
 
     def step_frame(self) -> None:
         """Advance the fluid to the next frame time; raise SimulationUnstable if it diverged."""

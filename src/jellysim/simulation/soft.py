@@ -118,7 +118,7 @@ class SoftBellSimulation:
         try:
             probe.step(min(probe.stable_dt(), 1e-6), self._force)
         except FluidDiverged:
-            pass  # compiled all the same; a real step that diverges is reported with its time
+            pass  # the first real step reports it, with its time; it compiles what is left
         if self.tentacles is not None:
             self.tentacles.prepare()
 
