@@ -68,8 +68,11 @@ def test_hexagonal_lattice_constants_against_hand_counts(re, shells) -> None:
     assert ref.count == count
     assert ref.n0 == pytest.approx(n0, rel=1e-12)
     assert ref.lambda_ == pytest.approx(lam * l0**2, rel=1e-12)
+
+
+def test_hexagonal_n0_literal() -> None:
     # 6 (re/1 - 1) + 6 (re/sqrt(3) - 1) + 6 (re/2 - 1) at r_e = 2.1 l0
-    assert lattice_reference(2, l0, 2.1, "hexagonal").n0 == pytest.approx(8.174613391789288)
+    assert lattice_reference(2, 0.005, 2.1, "hexagonal").n0 == pytest.approx(8.174613391789288)
 
 
 def least_stiffness(lattice: str, re: float) -> float:
