@@ -121,11 +121,16 @@ def filled_height(height: float, l0: float, lattice: str = "square") -> float:
     return _rows_below(height, row) * row
 
 
-def _hexagonal(lattice: str, dim: int) -> bool:
+def check_lattice(lattice: str, dim: int) -> None:
+    """Raise ValueError unless ``lattice`` is one of LATTICES and exists in ``dim`` dimensions."""
     if lattice not in LATTICES:
         raise ValueError(f"lattice = {lattice!r}; allowed: {', '.join(LATTICES)}")
     if lattice == "hexagonal" and dim != 2:
         raise ValueError("the hexagonal lattice is 2-D only")
+
+
+def _hexagonal(lattice: str, dim: int) -> bool:
+    check_lattice(lattice, dim)
     return lattice == "hexagonal"
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid import kernels
 from jellysim.fluid.deflation import deflated_cg
-from jellysim.fluid.geometry import DUMMY, FLUID, LATTICES, ROW_HEIGHT, WALL
+from jellysim.fluid.geometry import DUMMY, FLUID, ROW_HEIGHT, WALL, check_lattice
 
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count")
@@ -145,12 +145,10 @@ class MPSParameters:
             ("surface", self.surface, SURFACES),
             ("gradient", self.gradient, GRADIENTS),
             ("solver", self.solver, SOLVERS),
-            ("lattice", self.lattice, LATTICES),
         ):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
-        if self.lattice == "hexagonal" and self.dim != 2:
-            raise ValueError("the hexagonal lattice is 2-D only")
+        check_lattice(self.lattice, self.dim)
         if self.lattice == "hexagonal" and self.surface == "neighbour-count":
             # its threshold counts the square lattice's neighbours (the second row of the
             # hexagonal one has 15 of 18, under 0.85 N0, and would always be on the surface)
@@ -202,10 +200,7 @@ def lattice_reference(
     """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the lattice points r_j != 0 with
     ``|r_j| < re l0``: on the square/cubic lattice ``r_j = l0 m`` (integer m), on the hexagonal
     one (2-D) ``r_j = l0 (m_1 + m_2 / 2, m_2 sqrt(3) / 2)``."""
-    if lattice not in LATTICES:
-        raise ValueError(f"lattice = {lattice!r}; allowed: {', '.join(LATTICES)}")
-    if lattice == "hexagonal" and dim != 2:
-        raise ValueError("the hexagonal lattice is 2-D only")
+    check_lattice(lattice, dim)
     # m_1 reaches |m_1 + m_2 / 2| + |m_2| / 2 on the hexagonal lattice
     reach = int(math.ceil(re)) if lattice == "square" else int(math.ceil(2.0 * re)) + 1
     axis = np.arange(-reach, reach + 1)
