@@ -2,18 +2,18 @@
 
     .venv/bin/python benchmarks/bench_pysph.py [--per-width 40 ...] [--threads 2]
         [--scheme wcsph ...] [--no-mps | --no-pysph] [--solver iccg|deflated]
-        [--pysph .venv-pysph/bin/python] [--set KEY=VALUE ...]
+        [--pysph .venv-pysph/bin/python] [--set KEY=VALUE ...] [--save RUNS.json]
     # --pysph: the venv of benchmarks/pysph_env.sh
 
 Martin & Moyce's n^2 = 2 column (width a, height 2a) collapsing, at N particles across a, to
 T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after the other:
 
 - jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank; since 2026-11-24 the hexagonal
-  lattice with the mixed source and the corrected gradient, ``--set fluid.lattice=square --set
-  fluid.source=standard --set fluid.gradient=standard`` for the paper's scheme) at
-  fluid.spacing = a / N (and the pressure solver ``--solver``, the preset's ICCG by default),
-  stepped by the solver at its own
-  stable dt; the surge front recorded after every step.
+  lattice with the mixed source, the corrected gradient and the either-density surface; the
+  paper's scheme is ``--set fluid.lattice=square --set fluid.source=standard
+  --set fluid.gradient=standard --set fluid.surface=standard``) at fluid.spacing = a / N (and
+  the pressure solver ``--solver``, the preset's ICCG by default), stepped by the solver at its
+  own stable dt; the surge front recorded after every step.
 - PySPH: its example dam_break_2d (a = 1 m, a 4a tank, WCSPH with its adaptive step) at
   dx = a / N, run in PySPH's own venv by benchmarks/pysph_dam_break.py; the front at 200
   outputs. Its block has N + 1 particles across (both ends included).
@@ -76,6 +76,13 @@ def run_mps(
         steps += 1
         times.append(solver.time * scale)
         fronts.append(float(surge_front(solver.position[None], solver.alive[None], fluid, a)[0]))
+        if steps % 250 == 0:  # progress, to stderr: the finest runs take most of an hour
+            print(
+                f"  MPS {per_width} across: step {steps}, T = {times[-1]:.3f}, front "
+                f"{fronts[-1]:.3f} a, dt {times[-1] - times[-2]:.2e} in T, "
+                f"{time.perf_counter() - start:.0f} s",
+                file=sys.stderr, flush=True,
+            )  # fmt: skip
     seconds = time.perf_counter() - start
     return {
         "seconds": seconds,
@@ -133,6 +140,10 @@ def main() -> None:
         "--set", action="append", default=[], metavar="KEY=VALUE",
         help="a scene override for jellysim, e.g. fluid.lattice=square",
     )  # fmt: skip
+    parser.add_argument(
+        "--save", type=Path, metavar="RUNS.json",
+        help="also write every run's front curve (T, x/a) and timing to this JSON file",
+    )  # fmt: skip
     args = parser.parse_args()
     if not args.no_pysph and not Path(args.pysph).exists():
         sys.exit(f"no PySPH Python at {args.pysph}: build it with benchmarks/pysph_env.sh")
@@ -144,13 +155,21 @@ def main() -> None:
     print("| code, particles across a | fluid particles | steps | wall s | steps/s | "
           "front error, raw | shifted (shift) |")  # fmt: skip
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    saved: dict[str, dict[str, object] | str] = {}
+
+    def report(name: str, run: dict[str, object] | str) -> None:
+        print(describe(name, run), flush=True)
+        saved[name] = run
+        if args.save:
+            args.save.write_text(json.dumps(saved) + "\n")
+
     for per_width in args.per_width or [40]:
         if not args.no_mps:
-            name = f"jellysim MPS ({args.solver or 'iccg'}), {per_width}"
-            print(describe(name, run_mps(per_width, args.solver, args.set)), flush=True)
+            name = f"jellysim MPS ({args.solver or 'preset'}), {per_width}"
+            report(name, run_mps(per_width, args.solver, args.set))
         for scheme in [] if args.no_pysph else args.scheme or ["wcsph"]:
-            run = run_pysph(args.pysph, per_width, args.threads, scheme)
-            print(describe(f"PySPH {scheme.upper()}, {per_width}", run), flush=True)
+            name = f"PySPH {scheme.upper()}, {per_width}"
+            report(name, run_pysph(args.pysph, per_width, args.threads, scheme))
 
 
 if __name__ == "__main__":

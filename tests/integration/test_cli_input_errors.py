@@ -270,3 +270,16 @@ def test_hexagonal_lattice_in_three_dimensions_is_refused(tmp_path: Path) -> Non
         ("run", "tank-3d", "--set", "fluid.lattice=hexagonal"),
         ("fluid.lattice = 'hexagonal' is 2-D only",),
     )
+
+
+def test_either_density_surface_without_the_mixed_source_is_refused(tmp_path: Path) -> None:
+    """The either-density surface also tests n at the start of the step, which only the mixed
+    source computes: refused before anything is written, naming the key to set."""
+    check_subprocess(
+        tmp_path,
+        (
+            "run", "hydrostatic-2d", "--set", "fluid.surface=either-density",
+            "--set", "fluid.source=standard", "--set", "fluid.gradient=standard",
+        ),
+        ("fluid.surface = 'either-density'", "fluid.source = 'mixed'"),
+    )  # fmt: skip

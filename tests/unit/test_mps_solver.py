@@ -360,3 +360,27 @@ def test_step_at_rest_under_gravity(kappa: float | None) -> None:
     for bad in (0.0, -0.1):
         with pytest.raises(ValueError, match="acceleration_number"):
             MPSParameters(dim=2, l0=L0, acceleration_number=bad)
+
+
+def test_either_density_surface_also_tests_the_start_density() -> None:
+    """surface = "either-density" (docs/theory/fluid.md F7b): a particle whose number density
+    was under beta n0 at the start of the step stays on the free surface (Dirichlet p = 0,
+    no PPE row) even when n* has reached beta n0; the standard criterion tests n* alone. Only
+    with the mixed source, which computes n^k."""
+    with pytest.raises(ValueError, match="either-density"):
+        MPSParameters(dim=2, l0=L0, surface="either-density")
+    solver = dam_break(source="mixed", gradient="corrected", surface="either-density")
+    c = solver.constants
+    dt = 5e-4
+    plain = solver.poisson_system(dt)  # no start density: n* alone, as "standard"
+    interior = np.flatnonzero(plain.unknown & (solver.kind == FLUID))
+    assert interior.size > 600
+    start = np.full(solver.kind.shape, c.n0)
+    chosen = interior[[0, interior.size // 2, -1]]
+    start[chosen] = 0.9 * solver.params.beta * c.n0
+    both = solver.poisson_system(dt, start_density=start)
+    assert not both.unknown[chosen].any()
+    others = np.ones(solver.kind.shape, dtype=bool)
+    others[chosen] = False
+    assert np.array_equal(both.unknown[others], plain.unknown[others])
+    assert both.matrix.indptr.size == plain.matrix.indptr.size - chosen.size

@@ -16,7 +16,7 @@ GRAVITY = 9.81
 DENSITY = 1000.0
 # dam-break-2d's and hydrostatic-2d's scheme, with the lattice "hexagonal" (and its surface
 # threshold, 0.93)
-HEXAGONAL = {"source": "mixed", "gradient": "corrected"}
+HEXAGONAL = {"source": "mixed", "gradient": "corrected", "surface": "either-density"}
 
 
 def build(

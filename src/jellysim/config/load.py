@@ -284,6 +284,11 @@ def _check_fluid(scene: Scene) -> None:
             "fluid.source = 'mixed' needs fluid.gradient = 'corrected': with the standard "
             "gradient the mixed source is unstable (docs/fluid.md)"
         )
+    if f.surface == "either-density" and f.source != "mixed":
+        raise InputError(
+            "fluid.surface = 'either-density' needs fluid.source = 'mixed' (it also tests "
+            "the number density at the start of the step, which only the mixed source computes)"
+        )
     if f.lattice == "hexagonal" and f.dimensions != 2:
         raise InputError(
             "fluid.lattice = 'hexagonal' is 2-D only: set fluid.dimensions = 2 or "

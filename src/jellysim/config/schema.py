@@ -284,8 +284,11 @@ class Fluid:
     surface: str = param(
         "standard",
         kind="choice",
-        choices=("standard",),
-        doc="free-surface detection: n < beta n0 (Koshizuka & Oka 1996)",
+        choices=("standard", "either-density"),
+        doc="free-surface detection: 'standard', n* < beta n0 after the explicit stage "
+        "(Koshizuka & Oka 1996); 'either-density', also where n < beta n0 at the start of the "
+        "step, so that a splash particle pushed into a neighbour stays on the surface (this "
+        "project's; with source = 'mixed' only)",
     )
     surface_threshold: float | None = param(
         None,

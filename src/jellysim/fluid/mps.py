@@ -33,7 +33,7 @@ from jellysim.fluid.deflation import deflated_cg
 from jellysim.fluid.geometry import DUMMY, FLUID, ROW_HEIGHT, WALL, check_lattice
 
 SOURCES = ("standard", "mixed")
-SURFACES = ("standard", "neighbour-count")
+SURFACES = ("standard", "neighbour-count", "either-density")
 SOLVERS = ("iccg", "cg", "deflated")
 GRADIENTS = ("standard", "corrected")
 # beta of the surface criterion n < beta n0 when none is given, per lattice. 0.97 is Koshizuka &
@@ -76,7 +76,13 @@ class MPSParameters:
     - ``surface``: "standard", free surface where ``n* < beta n0``; "neighbour-count", also where
       fewer than ``surface_neighbour_threshold`` N0 neighbours lie within r_e (N0 the lattice
       count) [Tanaka & Masunaga 2010]. Not yet sound: in the 2-D hydrostatic tank it lets a
-      surface particle be kicked to ~7 m/s after 0.14 s; use "standard".
+      surface particle be kicked to ~7 m/s after 0.14 s; use "standard". "either-density"
+      (this project's, docs/theory/fluid.md F7b; mixed source only): on the free surface where
+      ``n* < beta n0`` or ``n^k < beta n0``, so that a surface particle pushed into a
+      neighbour during the explicit stage (a collision at a splash) does not become, for that
+      step only, an interior particle whose neighbours are almost all Dirichlet p = 0: its
+      velocity-divergence source then makes a pressure spike (53 kPa, 25 times the column's
+      hydrostatic pressure, in the dam break at 158 across) that throws its neighbours.
     - ``gradient``: "standard", the minimum-pressure gradient of Eq. (F10) [Koshizuka & Oka
       1996]; "corrected", the same multiplied by the inverse moment matrix of the particle's
       neighbourhood, Eq. (F10a) [Khayyer & Gotoh 2011]: a particle at a flat free surface
@@ -153,6 +159,9 @@ class MPSParameters:
             # its threshold counts the square lattice's neighbours (the second row of the
             # hexagonal one has 15 of 18, under 0.85 N0, and would always be on the surface)
             raise ValueError("surface = 'neighbour-count' needs the square lattice")
+        if self.surface == "either-density" and self.source != "mixed":
+            # n^k is computed (for every fluid and wall particle) by the mixed source only
+            raise ValueError("surface = 'either-density' needs source = 'mixed'")
         if self.acceleration_number is not None and not self.acceleration_number > 0.0:
             raise ValueError(f"acceleration_number must be > 0, not {self.acceleration_number}")
         if self.gravity is not None and len(self.gravity) != self.dim:
@@ -194,9 +203,7 @@ class LatticeReference:
     count: int
 
 
-def lattice_reference(
-    dim: int, l0: float, re: float, lattice: str = "square"
-) -> LatticeReference:
+def lattice_reference(dim: int, l0: float, re: float, lattice: str = "square") -> LatticeReference:
     """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the lattice points r_j != 0 with
     ``|r_j| < re l0``: on the square/cubic lattice ``r_j = l0 m`` (integer m), on the hexagonal
     one (2-D) ``r_j = l0 (m_1 + m_2 / 2, m_2 sqrt(3) / 2)``."""
@@ -416,7 +423,13 @@ class MPSSolver:
         lap("explicit")
 
         # Neighbours, number density n*, free surface and PPE at r*, Eq. (F2), (F7)-(F9)
-        system = self.poisson_system(dt, clock=lap, reuse=True, rows=self._wet(nb))
+        system = self.poisson_system(
+            dt,
+            clock=lap,
+            reuse=True,
+            rows=self._wet(nb),
+            start_density=self._scratch if p.source == "mixed" else None,
+        )
         stats.surface = system.surface
         matrix, rhs, particles = system.matrix, system.rhs, system.particles
 
@@ -575,6 +588,7 @@ class MPSSolver:
         clock: Callable[[str], None] | None = None,
         reuse: bool = False,
         rows: np.ndarray | None = None,
+        start_density: np.ndarray | None = None,
     ) -> PoissonSystem:
         """The pressure Poisson equation at the current positions (taken as r*): neighbours,
         number density n* (stored in ``number_density``), free-surface particles (Dirichlet
@@ -583,7 +597,9 @@ class MPSSolver:
         ``reuse``: the matrix and neighbour list are written into the solver's buffers (as
         :meth:`step` does), valid until the next step or call; otherwise arrays of their own.
         ``rows``: the particles given a neighbour-list row ((N,) bool; :meth:`_wet`), by
-        default every live fluid and wall particle; the others are on the free surface."""
+        default every live fluid and wall particle; the others are on the free surface.
+        ``start_density``: n^k ((N,), the number density at the start of the step), which the
+        "either-density" criterion also tests; without it that criterion tests n* alone."""
         p = self.params
         c = self.constants
         # Dummies need no row: they only complete the number density of their neighbours.
@@ -598,6 +614,8 @@ class MPSSolver:
         if p.surface == "neighbour-count":
             count0 = self.reference["number_density"].count
             surface |= self._neighbour_count < p.surface_neighbour_threshold * count0
+        if p.surface == "either-density" and start_density is not None:
+            surface |= start_density < p.beta * c.n0  # n^k too (docs/theory/fluid.md F7b)
         surface &= solid
         unknown = solid & ~surface
         blocks = kernels.number_unknowns(
