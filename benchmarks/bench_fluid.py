@@ -13,7 +13,8 @@ every case; Courant 0.2).
 One step is taken first (JIT compilation or cache load, not timed); then ``--steps`` steps at the
 solver's stable dt are timed. Walls and dummy particles are not counted.
 
-``--compare-solvers``: after the timed steps, the PPE of the next step is solved from a cold
+``--compare-solvers``: after the timed steps, the PPE at the current positions (close to the
+next step's; ``compare_solvers``) is solved from a cold
 start (zero pressure) by plain CG, ICCG and deflated CG to the scene's tolerance, and each
 one's iterations and wall time are printed (issue 5: a preconditioned CG at least 3x fewer
 iterations than plain CG).
@@ -107,7 +108,9 @@ def main() -> None:
 
 
 def compare_solvers(solver: MPSSolver) -> None:
-    """Iterations and wall time of each PPE solver on the next step's PPE, from zero."""
+    """Iterations and wall time of each PPE solver, from zero, on the PPE at the current
+    positions taken as r* (no explicit stage; the mixed source's n^k is the last step's start,
+    and the either-density surface tests n* alone): close to the next step's PPE."""
     p = solver.params
     # Assembled as for ICCG (sorted columns, which IC(0) needs; the others take any order).
     solver.params = dataclasses.replace(p, solver="iccg")

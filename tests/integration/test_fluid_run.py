@@ -135,24 +135,31 @@ def test_bad_fluid_scenes_exit_2(tmp_path: Path, sets: tuple[str, ...], fragment
 
 
 def test_scheme_keys_reach_the_solver() -> None:
-    """fluid.source, fluid.gradient and fluid.lattice of a scene are the solver's: hydrostatic-2d
-    and dam-break-2d choose the mixed source with the corrected gradient on the hexagonal
-    lattice (and its surface threshold, 0.93); the paper's standard scheme on the square lattice
-    is three keys away (and 0.97)."""
+    """fluid.source, fluid.gradient, fluid.surface and fluid.lattice of a scene are the
+    solver's: hydrostatic-2d and dam-break-2d choose the mixed source with the corrected
+    gradient and the either-density surface on the hexagonal lattice (and its surface
+    threshold, 0.93); the paper's standard scheme on the square lattice is four keys away (and
+    0.97)."""
     from jellysim.simulation.fluid import mps_parameters
 
     still = mps_parameters(jellysim.load_scene("hydrostatic-2d"))
     assert (still.source, still.gradient, still.lattice) == ("mixed", "corrected", "hexagonal")
+    assert still.surface == "either-density"
     assert still.beta == 0.93  # the hexagonal lattice's default
     dam = mps_parameters(jellysim.load_scene("dam-break-2d"))
     assert (dam.source, dam.gradient, dam.lattice) == ("mixed", "corrected", "hexagonal")
+    assert dam.surface == "either-density"
     paper = mps_parameters(
         jellysim.load_scene(
             "dam-break-2d",
-            {"fluid.lattice": "square", "fluid.source": "standard", "fluid.gradient": "standard"},
+            {
+                "fluid.lattice": "square", "fluid.source": "standard",
+                "fluid.gradient": "standard", "fluid.surface": "standard",
+            },
         )
-    )
+    )  # fmt: skip
     assert (paper.source, paper.gradient, paper.lattice) == ("standard", "standard", "square")
+    assert paper.surface == "standard"
     assert paper.beta == 0.97
     set_beta = jellysim.load_scene("hydrostatic-2d", {"fluid.surface_threshold": 0.95})
     assert mps_parameters(set_beta).beta == 0.95

@@ -13,7 +13,7 @@ import scipy.sparse.linalg as spla
 
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid import deflation, kernels, mps
-from jellysim.fluid.geometry import FLUID, tank, water_block
+from jellysim.fluid.geometry import DUMMY, FLUID, tank, water_block
 from jellysim.fluid.mps import FluidDiverged, MPSParameters, MPSSolver, solve
 
 A = 0.1  # column width, m
@@ -384,3 +384,32 @@ def test_either_density_surface_also_tests_the_start_density() -> None:
     others[chosen] = False
     assert np.array_equal(both.unknown[others], plain.unknown[others])
     assert both.matrix.indptr.size == plain.matrix.indptr.size - chosen.size
+
+
+def test_step_gives_the_surface_test_the_number_density_at_the_start_of_the_step() -> None:
+    """What step() hands poisson_system as n^k is the number density at the positions the step
+    starts from, for every live fluid and wall particle (docs/theory/fluid.md F7b), not n*: a
+    twin solver stepped alike measures it at those positions independently."""
+    scheme = {"source": "mixed", "gradient": "corrected", "surface": "either-density"}
+    stepped, twin = dam_break(**scheme), dam_break(**scheme)
+    dt = 5e-4
+    for _ in range(10):
+        stepped.step(dt)
+        twin.step(dt)
+    twin.poisson_system(dt)  # n at the twin's (the same) positions, into its number_density
+    expected = twin.number_density.copy()
+    seen: list[np.ndarray] = []
+    build = stepped.poisson_system
+
+    def spy(*args: object, start_density: np.ndarray | None = None, **kw: object) -> object:
+        assert start_density is not None
+        seen.append(start_density.copy())
+        return build(*args, start_density=start_density, **kw)  # type: ignore[arg-type]
+
+    stepped.poisson_system = spy  # type: ignore[method-assign]
+    stepped.step(dt)
+    assert len(seen) == 1
+    solid = stepped.alive & (stepped.kind != DUMMY)
+    np.testing.assert_allclose(seen[0][solid], expected[solid], rtol=1e-12, atol=1e-12)
+    moved = np.abs(stepped.number_density - expected)[solid & (stepped.kind == FLUID)].max()
+    assert moved > 1e-3  # n* of the step differs, so n^k was not confused with it

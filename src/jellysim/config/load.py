@@ -287,7 +287,8 @@ def _check_fluid(scene: Scene) -> None:
     if f.surface == "either-density" and f.source != "mixed":
         raise InputError(
             "fluid.surface = 'either-density' needs fluid.source = 'mixed' (it also tests "
-            "the number density at the start of the step, which only the mixed source computes)"
+            "the number density at the start of the step, which only the mixed source "
+            "computes); with another source set fluid.surface = 'standard'"
         )
     if f.lattice == "hexagonal" and f.dimensions != 2:
         raise InputError(

@@ -77,12 +77,11 @@ class MPSParameters:
       fewer than ``surface_neighbour_threshold`` N0 neighbours lie within r_e (N0 the lattice
       count) [Tanaka & Masunaga 2010]. Not yet sound: in the 2-D hydrostatic tank it lets a
       surface particle be kicked to ~7 m/s after 0.14 s; use "standard". "either-density"
-      (this project's, docs/theory/fluid.md F7b; mixed source only): on the free surface where
-      ``n* < beta n0`` or ``n^k < beta n0``, so that a surface particle pushed into a
-      neighbour during the explicit stage (a collision at a splash) does not become, for that
-      step only, an interior particle whose neighbours are almost all Dirichlet p = 0: its
-      velocity-divergence source then makes a pressure spike (53 kPa, 25 times the column's
-      hydrostatic pressure, in the dam break at 158 across) that throws its neighbours.
+      (this project's, docs/theory/fluid.md F7b; mixed source only): fluid and wall particles
+      are on the free surface where ``n* < beta n0`` or ``n^k < beta n0``, so that a surface
+      particle pushed into a neighbour during the explicit stage (a collision at a splash) does
+      not become, for that step only, an interior particle whose neighbours are almost all
+      Dirichlet p = 0, with a pressure spike from its velocity-divergence source.
     - ``gradient``: "standard", the minimum-pressure gradient of Eq. (F10) [Koshizuka & Oka
       1996]; "corrected", the same multiplied by the inverse moment matrix of the particle's
       neighbourhood, Eq. (F10a) [Khayyer & Gotoh 2011]: a particle at a flat free surface
