@@ -11,10 +11,12 @@ T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after t
 - jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank; since 2026-11-24 the hexagonal
   lattice with the mixed source, the corrected gradient and the either-density surface; the
   paper's scheme is ``--set fluid.lattice=square --set fluid.source=standard
-  --set fluid.gradient=standard --set fluid.surface=standard``) at fluid.spacing = a / N (and
-  the pressure solver ``--solver``, the preset's ICCG by default), stepped by the solver at its
-  own stable dt; the surge front recorded after every step.
-- PySPH: its example dam_break_2d (a = 1 m, a 4a tank, WCSPH with its adaptive step) at
+  --set fluid.gradient=standard --set fluid.surface=standard
+  --set fluid.collision_distance=0.5``) at fluid.spacing = a / N (and the pressure solver
+  ``--solver``, the preset's ICCG by default), stepped by the solver at its own stable dt; the
+  surge front recorded after every step.
+- PySPH: its example dam_break_2d (a = 1 m; in a 5a tank, like jellysim's, since 2026-11-25: the
+  example's 4a tank caps its front at T = 2.93; WCSPH with its adaptive step) at
   dx = a / N, run in PySPH's own venv by benchmarks/pysph_dam_break.py; the front at 200
   outputs. Its block has N + 1 particles across (both ends included).
 

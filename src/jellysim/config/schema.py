@@ -298,6 +298,14 @@ class Fluid:
         doc="beta: a particle with n < beta n0 is on the free surface (default: 0.97 on the "
         "square lattice, 0.93 on the hexagonal one, whose second row has n = 0.962 n0)",
     )
+    collision_distance: float = param(
+        0.5,
+        gt=0.0,
+        lt=1.0,
+        doc="pairs closer than this many spacings that approach each other collide (momentum "
+        "exchanged, restitution 0.2; Koshizuka & Oka's collision model); 0.8 on the 2-D presets "
+        "keeps splash particles from being thrown off the floor (docs/fluid.md)",
+    )
     lattice: str = param(
         "square",
         kind="choice",

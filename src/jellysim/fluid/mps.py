@@ -89,6 +89,10 @@ class MPSParameters:
       neighbourhoods at walls are compensated but for the minimum-pressure term. The mixed
       source needs it: with the standard gradient the mixed source's dam break blows up
       (docs/fluid.md).
+    - ``collision_distance`` (l0) and ``collision_restitution``: the collision model, Eq. (F6).
+      Koshizuka & Oka's 0.5 l0 lets a surge's tip particle sink to about 0.65 l0 above a floor
+      particle, whose PPE row (its neighbours nearly all on the free surface) then throws it off
+      the floor; 0.8 l0 stops that without slowing the water behind (docs/fluid.md).
     - ``solver``: "iccg" (IC(0)-preconditioned CG), "cg" (plain CG, for comparison) or
       "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
       :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
@@ -413,7 +417,8 @@ class MPSSolver:
             self.position, self.velocity, self.kind, self.alive, nb, c,
             self._acceleration, dt, self._position, self._velocity,
         )  # fmt: skip
-        # Collision model, Eq. (F6); r^k neighbours hold every pair closer than 0.5 l0 at r*.
+        # Collision model, Eq. (F6); r^k neighbours hold every pair closer than the collision
+        # distance at r* (a particle moves well under l0 in the explicit stage).
         kernels.collision(
             self._position, self._velocity, self.kind, self.alive, nb,
             p.collision_distance * p.l0, p.collision_restitution, dt,

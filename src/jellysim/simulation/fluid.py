@@ -65,6 +65,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         surface=f.surface,
         gradient=f.gradient,
         surface_threshold=f.surface_threshold,
+        collision_distance=f.collision_distance,
         lattice=f.lattice,
         solver=f.solver,
         coarse_cell=f.coarse_cell,
