@@ -413,3 +413,24 @@ def test_step_gives_the_surface_test_the_number_density_at_the_start_of_the_step
     np.testing.assert_allclose(seen[0][solid], expected[solid], rtol=1e-12, atol=1e-12)
     moved = np.abs(stepped.number_density - expected)[solid & (stepped.kind == FLUID)].max()
     assert moved > 1e-3  # n* of the step differs, so n^k was not confused with it
+
+
+def test_pressure_solvers_are_chosen_by_name() -> None:
+    """STYLE rule 7: the solvers are a registry by the scene's name for them; the scene schema
+    offers exactly its names, and an unknown one is refused, not silently replaced."""
+    from jellysim.config.schema import Fluid
+
+    offered = {f.name: f for f in dataclasses.fields(Fluid)}["solver"].metadata["choices"]
+    assert tuple(offered) == tuple(mps.PRESSURE_SOLVERS) == ("iccg", "cg", "deflated")
+    with pytest.raises(ValueError, match="allowed: iccg, cg, deflated"):
+        MPSParameters(dim=2, l0=L0, solver="amg")
+    matrix = kernels.Matrix(  # A = [2], one row, one block
+        np.array([0, 1], dtype=np.int64), np.array([0], dtype=np.int32), np.array([2.0]),
+        np.array([0], dtype=np.int64), np.array([1, 1], dtype=np.int64),
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="solver = 'amg'"):
+        solve(matrix, np.ones(1), np.zeros(1), "amg")
+    for name in ("iccg", "cg"):
+        x = np.zeros(1)
+        iterations, residual, _ = solve(matrix, np.ones(1), x, name, 1e-12, 10)
+        assert x[0] == pytest.approx(0.5) and residual <= 1e-12 and iterations >= 1

@@ -23,7 +23,7 @@ import math
 import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -34,7 +34,6 @@ from jellysim.fluid.geometry import DUMMY, FLUID, ROW_HEIGHT, WALL, check_lattic
 
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count", "either-density")
-SOLVERS = ("iccg", "cg", "deflated")
 GRADIENTS = ("standard", "corrected")
 # beta of the surface criterion n < beta n0 when none is given, per lattice. 0.97 is Koshizuka &
 # Oka's for the square lattice, whose second row under a flat surface has n = 0.992 n0 (it misses
@@ -153,7 +152,7 @@ class MPSParameters:
             ("source", self.source, SOURCES),
             ("surface", self.surface, SURFACES),
             ("gradient", self.gradient, GRADIENTS),
-            ("solver", self.solver, SOLVERS),
+            ("solver", self.solver, tuple(PRESSURE_SOLVERS)),
         ):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
@@ -725,6 +724,100 @@ class CoarseSpace(NamedTuple):
     size: float
 
 
+class PressureSolver(Protocol):
+    """A pressure solver of the registry :data:`PRESSURE_SOLVERS`: solves ``A p = b`` in place
+    in ``solution`` (initial guess in, answer out) to the relative residual ``tolerance``, and
+    returns (iterations, relative residual, IC shift used, 0 when none)."""
+
+    def __call__(
+        self,
+        matrix: kernels.Matrix,
+        rhs: np.ndarray,
+        solution: np.ndarray,
+        tolerance: float,
+        max_iterations: int,
+        coarse: CoarseSpace | None,
+    ) -> tuple[int, float, float]: ...
+
+
+def _conjugate_gradient(
+    matrix: kernels.Matrix,
+    rhs: np.ndarray,
+    solution: np.ndarray,
+    tolerance: float,
+    max_iterations: int,
+    coarse: CoarseSpace | None,
+) -> tuple[int, float, float]:
+    """Plain CG (no preconditioner), for comparison."""
+    iterations, residual = kernels.conjugate_gradient(
+        matrix, kernels.no_factor(), False, rhs, solution, tolerance, max_iterations
+    )
+    return iterations, residual, 0.0
+
+
+def _incomplete_cholesky_cg(
+    matrix: kernels.Matrix,
+    rhs: np.ndarray,
+    solution: np.ndarray,
+    tolerance: float,
+    max_iterations: int,
+    coarse: CoarseSpace | None,
+) -> tuple[int, float, float]:
+    """ICCG: IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a
+    pivot is not positive."""
+    factor = np.zeros_like(matrix.data)
+    for shift in (0.0, *IC_SHIFTS):
+        if kernels.incomplete_cholesky(matrix, shift, factor):
+            break
+    else:
+        raise FluidDiverged(
+            "IC(0) broke down even with the largest diagonal shift",
+            time=math.nan,
+            iterations=0,
+            residual=math.inf,
+        )
+    compact = kernels.compact_factor(matrix, factor)
+    iterations, residual = kernels.conjugate_gradient(
+        matrix, compact, True, rhs, solution, tolerance, max_iterations
+    )
+    return iterations, residual, shift
+
+
+def _deflated_cg(
+    matrix: kernels.Matrix,
+    rhs: np.ndarray,
+    solution: np.ndarray,
+    tolerance: float,
+    max_iterations: int,
+    coarse: CoarseSpace | None,
+) -> tuple[int, float, float]:
+    """CG with Jacobi and a coarse problem on aggregates of particles (``coarse`` required;
+    :mod:`jellysim.fluid.deflation`)."""
+    if coarse is None:
+        raise ValueError("the deflated solver needs the rows' positions (coarse)")
+    try:
+        iterations, residual = deflated_cg(
+            matrix, *coarse, rhs, solution, tolerance, max_iterations
+        )
+    except RuntimeError as error:  # SuperLU: a singular coarse matrix (A not definite)
+        raise FluidDiverged(
+            f"the deflated solver's coarse problem could not be factored ({error})",
+            time=math.nan,
+            iterations=0,
+            residual=math.inf,
+        ) from None
+    return iterations, residual, 0.0
+
+
+# The pressure solvers by the name a scene gives (fluid.solver); config.schema lists the same
+# names (a unit test holds the two together).
+PRESSURE_SOLVERS: dict[str, PressureSolver] = {
+    "iccg": _incomplete_cholesky_cg,
+    "cg": _conjugate_gradient,
+    "deflated": _deflated_cg,
+}
+
+
 def solve(
     matrix: kernels.Matrix,
     rhs: np.ndarray,
@@ -734,46 +827,12 @@ def solve(
     max_iterations: int = 2000,
     coarse: CoarseSpace | None = None,
 ) -> tuple[int, float, float]:
-    """Solve the PPE in place in ``solution`` (initial guess in, answer out) by ICCG, CG or
-    deflated CG (``coarse`` required).
-
-    IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a pivot is
-    not positive. Returns (iterations, relative residual, IC shift used).
-    """
-    if method == "deflated":
-        if coarse is None:
-            raise ValueError("the deflated solver needs the rows' positions (coarse)")
-        try:
-            iterations, residual = deflated_cg(
-                matrix, *coarse, rhs, solution, tolerance, max_iterations
-            )
-        except RuntimeError as error:  # SuperLU: a singular coarse matrix (A not definite)
-            raise FluidDiverged(
-                f"the deflated solver's coarse problem could not be factored ({error})",
-                time=math.nan,
-                iterations=0,
-                residual=math.inf,
-            ) from None
-        return iterations, residual, 0.0
-    shift = 0.0
-    compact = kernels.no_factor()
-    if method == "iccg":
-        factor = np.zeros_like(matrix.data)
-        for shift in (0.0, *IC_SHIFTS):
-            if kernels.incomplete_cholesky(matrix, shift, factor):
-                break
-        else:
-            raise FluidDiverged(
-                "IC(0) broke down even with the largest diagonal shift",
-                time=math.nan,
-                iterations=0,
-                residual=math.inf,
-            )
-        compact = kernels.compact_factor(matrix, factor)
-    iterations, residual = kernels.conjugate_gradient(
-        matrix, compact, method == "iccg", rhs, solution, tolerance, max_iterations
-    )
-    return iterations, residual, shift
+    """Solve the PPE in place in ``solution`` (initial guess in, answer out) by the solver of
+    :data:`PRESSURE_SOLVERS` named ``method`` ("iccg", "cg" or "deflated", which needs
+    ``coarse``). Returns (iterations, relative residual, IC shift used)."""
+    if method not in PRESSURE_SOLVERS:
+        raise ValueError(f"solver = {method!r}; allowed: {', '.join(PRESSURE_SOLVERS)}")
+    return PRESSURE_SOLVERS[method](matrix, rhs, solution, tolerance, max_iterations, coarse)
 
 
 __all__ = [
@@ -785,6 +844,8 @@ __all__ = [
     "LatticeReference",
     "MPSParameters",
     "MPSSolver",
+    "PRESSURE_SOLVERS",
+    "PressureSolver",
     "StepStats",
     "lattice_reference",
     "solve",
