@@ -193,7 +193,7 @@ def test_dam_break_on_the_hexagonal_lattice() -> None:
 
 def test_dam_break_collisions_keep_the_tip_on_the_floor() -> None:
     """Why the 2-D presets collide at 0.8 l0 (docs/fluid.md, "Splash thrown off the floor").
-    With Koshizuka & Oka's 0.5 l0 a surface particle at the surge's tip sinks to about 0.65 l0
+    With the customary 0.5 l0 a surface particle at the surge's tip sinks to about 0.65 l0
     above a floor particle; that wall particle's PPE row, its neighbours nearly all on the free
     surface, then gets several kPa (against some 20 Pa of water above it) and throws the
     particle up at 0.4-0.9 m/s and forward. Such particles fly ahead of the water within 0.1 a

@@ -89,7 +89,7 @@ class MPSParameters:
       source needs it: with the standard gradient the mixed source's dam break blows up
       (docs/fluid.md).
     - ``collision_distance`` (l0) and ``collision_restitution``: the collision model, Eq. (F6).
-      Koshizuka & Oka's 0.5 l0 lets a surge's tip particle sink to about 0.65 l0 above a floor
+      The customary 0.5 l0 lets a surge's tip particle sink to about 0.65 l0 above a floor
       particle, whose PPE row (its neighbours nearly all on the free surface) then throws it off
       the floor; 0.8 l0 stops that without slowing the water behind (docs/fluid.md).
     - ``solver``: "iccg" (IC(0)-preconditioned CG), "cg" (plain CG, for comparison) or
