@@ -1003,6 +1003,44 @@ def _solve_small(matrix: np.ndarray, vector: np.ndarray) -> bool:
     return True
 
 
+@njit(cache=True, fastmath=FAST)
+def _surface_repulsion(
+    i: int,
+    position: np.ndarray,
+    pressure: np.ndarray,
+    kind: np.ndarray,
+    neighbours: Neighbours,
+    constants: Constants,
+    gradient: np.ndarray,
+) -> None:
+    """Add Eq. (F10b), the tangential repulsion of free-surface particle i, to its gradient
+    sum ``gradient`` (the raw sum, before the factor D / n0; :func:`pressure_correction`)."""
+    dim = position.shape[1]
+    re = constants.re_gradient
+    highest = pressure[i]
+    push = np.zeros(dim)
+    normal = np.zeros(dim)
+    for m in range(neighbours.start[i], neighbours.start[i + 1]):
+        j = neighbours.indices[m]
+        r = neighbours.distance[m]
+        if kind[j] == DUMMY or r >= constants.re_laplacian or r == 0.0:
+            continue
+        w = weight(r, constants.re_laplacian) / r
+        for k in range(dim):
+            normal[k] -= w * (position[j, k] - position[i, k])
+        if r < re:
+            highest = max(highest, pressure[j])
+            w = weight(r, re) / (r * r)
+            for k in range(dim):
+                push[k] += w * (position[j, k] - position[i, k])
+    size = np.sqrt(np.sum(normal * normal))
+    if size == 0.0:
+        return
+    along = np.sum(push * normal) / (size * size)
+    for k in range(dim):
+        gradient[k] += (highest - pressure[i]) * (push[k] - along * normal[k])
+
+
 @njit(cache=True, parallel=True, fastmath=FAST)
 def pressure_correction(
     position: np.ndarray,
@@ -1016,6 +1054,7 @@ def pressure_correction(
     out_position: np.ndarray,
     out_velocity: np.ndarray,
     corrected: bool = False,
+    surface: np.ndarray | None = None,
 ) -> None:
     """Pressure gradient with the minimum neighbour pressure, Eq. (F10), and the correction of
     fluid particles, Eq. (F13):
@@ -1029,6 +1068,11 @@ def pressure_correction(
     neighbourhood is one-sided (the free surface, a wall); there the corrected gradient is exact
     for a linear pressure when p_i is the least of its neighbourhood (the top layer under
     gravity), and otherwise off by the minimum-pressure term only.
+    ``surface`` ((N,) bool, or None for none): the free-surface particles given the tangential
+    repulsion of Eq. (F10b), ``(p_max,i - p_i) sum_j (r_j - r_i) w / r_ij^2`` (p_max,i the
+    largest pressure among i's fluid and wall neighbours within r_e,grad) with its component
+    along the surface normal removed; the normal is the direction away from the centroid of the
+    fluid and wall neighbours within the Laplacian radius, ``-sum_j (r_j - r_i) w(r, r_e,lap) / r``.
     Other kinds are copied unchanged.
     """
     n, dim = position.shape
@@ -1072,6 +1116,8 @@ def pressure_correction(
                         )
             moments *= dim / constants.n0_gradient
             _solve_small(moments, gradient)
+        if surface is not None and surface[i]:
+            _surface_repulsion(i, position, pressure, kind, neighbours, constants, gradient)
         for k in range(dim):
             du = coefficient * gradient[k]
             out_velocity[i, k] += du

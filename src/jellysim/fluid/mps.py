@@ -127,6 +127,7 @@ class MPSParameters:
     surface_neighbour_threshold: float = 0.85
     collision_distance: float = 0.5
     collision_restitution: float = 0.2
+    surface_repulsion: bool = False
     source: str = "standard"
     mixed_relaxation: float = 0.01
     surface: str = "standard"
@@ -465,6 +466,7 @@ class MPSSolver:
         kernels.pressure_correction(
             self.position, self.velocity, self.pressure, self.kind, self.alive,
             system.neighbours, c, dt, self._position, self._velocity, p.gradient == "corrected",
+            self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None,
         )  # fmt: skip
         self.position[:] = self._position
         self.velocity[:] = self._velocity
