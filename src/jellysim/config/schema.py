@@ -306,6 +306,15 @@ class Fluid:
         "exchanged, restitution 0.2; Koshizuka & Oka's collision model); 0.8 on the 2-D presets "
         "keeps splash particles from being thrown off the floor (docs/fluid.md)",
     )
+    surface_repulsion: bool = param(
+        False,
+        kind="bool",
+        doc="free-surface particles are pushed apart along the surface by the pressure range of "
+        "their neighbourhood, as the minimum-pressure gradient pushes interior particles apart "
+        "(this project's, docs/theory/fluid.md F10b): without it nothing holds surface "
+        "particles apart along the surface and still water's top row slides; on in the 2-D "
+        "presets",
+    )
     lattice: str = param(
         "square",
         kind="choice",

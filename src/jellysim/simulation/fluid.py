@@ -66,6 +66,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         gradient=f.gradient,
         surface_threshold=f.surface_threshold,
         collision_distance=f.collision_distance,
+        surface_repulsion=f.surface_repulsion,
         lattice=f.lattice,
         solver=f.solver,
         coarse_cell=f.coarse_cell,
