@@ -9,10 +9,11 @@ Martin & Moyce's n^2 = 2 column (width a, height 2a) collapsing, at N particles 
 T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after the other:
 
 - jellysim: the dam-break-2d preset (a = 0.1 m, a 5a tank; since 2026-11-24 the hexagonal
-  lattice with the mixed source, the corrected gradient and the either-density surface; the
-  paper's scheme is ``--set fluid.lattice=square --set fluid.source=standard
-  --set fluid.gradient=standard --set fluid.surface=standard
-  --set fluid.collision_distance=0.5``) at fluid.spacing = a / N (and the pressure solver
+  lattice with the mixed source, the corrected gradient and the either-density surface, since
+  2026-11-25 with collisions at 0.8 l0 and the surface repulsion; the paper's scheme is
+  ``--set fluid.lattice=square --set fluid.source=standard --set fluid.gradient=standard
+  --set fluid.surface=standard --set fluid.collision_distance=0.5
+  --set fluid.surface_repulsion=false``) at fluid.spacing = a / N (and the pressure solver
   ``--solver``, the preset's ICCG by default), stepped by the solver at its own stable dt; the
   surge front recorded after every step.
 - PySPH: its example dam_break_2d (a = 1 m; in a 5a tank, like jellysim's, since 2026-11-25: the

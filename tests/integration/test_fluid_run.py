@@ -138,8 +138,8 @@ def test_scheme_keys_reach_the_solver() -> None:
     """fluid.source, fluid.gradient, fluid.surface and fluid.lattice of a scene are the
     solver's: hydrostatic-2d and dam-break-2d choose the mixed source with the corrected
     gradient and the either-density surface on the hexagonal lattice (and its surface
-    threshold, 0.93) with collisions at 0.8 l0; the paper's standard scheme on the square lattice
-    is five keys away (and 0.97, 0.5 l0)."""
+    threshold, 0.93) with collisions at 0.8 l0 and the surface repulsion; the paper's standard
+    scheme on the square lattice is six keys away (and 0.97, 0.5 l0, no repulsion)."""
     from jellysim.simulation.fluid import mps_parameters
 
     still = mps_parameters(jellysim.load_scene("hydrostatic-2d"))
@@ -150,13 +150,14 @@ def test_scheme_keys_reach_the_solver() -> None:
     assert (dam.source, dam.gradient, dam.lattice) == ("mixed", "corrected", "hexagonal")
     assert dam.surface == "either-density"
     assert still.collision_distance == dam.collision_distance == 0.8
+    assert still.surface_repulsion and dam.surface_repulsion
     paper = mps_parameters(
         jellysim.load_scene(
             "dam-break-2d",
             {
                 "fluid.lattice": "square", "fluid.source": "standard",
                 "fluid.gradient": "standard", "fluid.surface": "standard",
-                "fluid.collision_distance": 0.5,
+                "fluid.collision_distance": 0.5, "fluid.surface_repulsion": False,
             },
         )
     )  # fmt: skip
@@ -164,6 +165,7 @@ def test_scheme_keys_reach_the_solver() -> None:
     assert paper.surface == "standard"
     assert paper.beta == 0.97
     assert paper.collision_distance == 0.5
+    assert not paper.surface_repulsion
     set_beta = jellysim.load_scene("hydrostatic-2d", {"fluid.surface_threshold": 0.95})
     assert mps_parameters(set_beta).beta == 0.95
     chosen = mps_parameters(

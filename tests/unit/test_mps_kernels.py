@@ -320,19 +320,23 @@ def test_hexagonal_tank_geometry() -> None:
 
 
 def _gradient_acceleration(
-    positions: np.ndarray, pressure: np.ndarray, corrected: bool
+    positions: np.ndarray,
+    pressure: np.ndarray,
+    corrected: bool,
+    surface: np.ndarray | None = None,
+    lattice: str = "square",
 ) -> np.ndarray:
     """-grad p / rho (m/s2) of every particle of a fluid block, by one pressure correction of
-    dt = 1 s from rest (Eq. F10 or F10a)."""
+    dt = 1 s from rest (Eq. F10 or F10a; with ``surface``, F10b on those particles)."""
     n, dim = positions.shape
     kinds = np.full(n, FLUID, dtype=np.int8)
-    solver = MPSSolver(MPSParameters(dim=dim, l0=0.01), positions, kinds)
+    solver = MPSSolver(MPSParameters(dim=dim, l0=0.01, lattice=lattice), positions, kinds)
     nb = solver.neighbours(solver.alive)
     out_position = np.empty_like(positions)
     out_velocity = np.empty_like(positions)
     kernels.pressure_correction(
         positions, np.zeros_like(positions), pressure, kinds, solver.alive, nb,
-        solver.constants, 1.0, out_position, out_velocity, corrected,
+        solver.constants, 1.0, out_position, out_velocity, corrected, surface,
     )  # fmt: skip
     return out_velocity
 
@@ -381,3 +385,53 @@ def test_corrected_gradient_falls_back_where_the_neighbourhood_is_degenerate() -
     assert np.all(np.isfinite(corrected))
     np.testing.assert_array_equal(corrected, standard)
     assert corrected[0, 0] < 0.0  # pushed away from the higher pressure
+
+
+@pytest.mark.parametrize(("dim", "lattice"), [(2, "square"), (2, "hexagonal"), (3, "square")])
+def test_surface_repulsion_is_tangential_and_restores_the_spacing(dim, lattice) -> None:
+    """Eq. (F10b) (docs/theory/fluid.md): on the top row of a block with the hydrostatic
+    pressure rho g (top - y), away from the sides, the repulsion adds nothing (its push along
+    the row cancels by symmetry and its normal part is removed), so Khayyer & Gotoh's exact
+    balance of gravity stands. A top particle moved along the row towards a neighbour is pushed
+    back in proportion to the move: a spring along the surface, which the corrected gradient
+    alone lacks (it is exact for the linear pressure whatever the spacing, so it gives no push
+    back). Its vertical balance changes at second order only: within 1 % for a move of
+    0.05 l0 (measured: 0.8 % on the square lattice, 0.5 % on the hexagonal one). In 3-D the
+    same holds on the cubic lattice's top layer."""
+    l0, rho, g = 0.01, 1000.0, 9.81
+    if dim == 2:
+        positions = water_block(0.0, 0.2, 0.0, 0.1, l0, lattice=lattice)
+    else:
+        positions = water_block(0.0, 0.16, 0.0, 0.16, l0, 0.0, 0.06)
+    centre = positions[:, :-1].max(axis=0) / 2 + 0.25 * l0
+    y = positions[:, -1]
+    top = y.max()
+    row = y > top - 0.1 * l0
+    off = np.sqrt(((positions[:, :-1] - centre) ** 2).sum(axis=1))
+    middle = np.arange(len(y)) == np.argmin(np.where(row, off, 1.0))
+    away = off < centre.min() - 4.5 * l0  # the normal's radius (4 l0) clear of the sides
+    pressure = rho * g * (top - y)
+    plain = _gradient_acceleration(positions, pressure, True, lattice=lattice)
+    repelled = _gradient_acceleration(positions, pressure, True, row, lattice)
+    np.testing.assert_allclose(repelled[away], plain[away], atol=1e-9 * g)
+    pushes = []
+    for move in (0.02, 0.05):
+        moved = positions.copy()
+        moved[middle, 0] += move * l0
+        plain = _gradient_acceleration(moved, pressure, True, lattice=lattice)[middle][0]
+        repelled = _gradient_acceleration(moved, pressure, True, row, lattice)[middle][0]
+        assert abs(plain[0]) < 1e-6 * g  # no push back without F10b
+        assert repelled[0] < -0.01 * g
+        assert repelled[-1] == pytest.approx(g, rel=0.01)
+        assert np.all(np.abs(repelled[1:-1]) < 1e-9 * g)  # nothing across the move (3-D)
+        pushes.append(-repelled[0])
+    assert pushes[1] / pushes[0] == pytest.approx(2.5, rel=0.05)
+
+
+def test_surface_repulsion_skips_a_particle_without_neighbours() -> None:
+    """A lone surface particle has no normal: F10b leaves its (zero) gradient alone."""
+    positions = np.array([[0.0, 0.0], [0.05, 0.0]])
+    pressure = np.array([0.0, 0.0])
+    surface = np.array([True, True])
+    accelerations = _gradient_acceleration(positions, pressure, True, surface)
+    np.testing.assert_array_equal(accelerations, 0.0)

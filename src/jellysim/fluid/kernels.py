@@ -1029,7 +1029,8 @@ def _surface_repulsion(
         for k in range(dim):
             normal[k] -= w * (position[j, k] - position[i, k])
         if r < re:
-            highest = max(highest, pressure[j])
+            if kind[j] == FLUID:
+                highest = max(highest, pressure[j])
             w = weight(r, re) / (r * r)
             for k in range(dim):
                 push[k] += w * (position[j, k] - position[i, k])
@@ -1070,7 +1071,8 @@ def pressure_correction(
     gravity), and otherwise off by the minimum-pressure term only.
     ``surface`` ((N,) bool, or None for none): the free-surface particles given the tangential
     repulsion of Eq. (F10b), ``(p_max,i - p_i) sum_j (r_j - r_i) w / r_ij^2`` (p_max,i the
-    largest pressure among i's fluid and wall neighbours within r_e,grad) with its component
+    largest pressure among i's fluid neighbours within r_e,grad; the sum over its fluid and wall
+    neighbours there) with its component
     along the surface normal removed; the normal is the direction away from the centroid of the
     fluid and wall neighbours within the Laplacian radius, ``-sum_j (r_j - r_i) w(r, r_e,lap) / r``.
     Other kinds are copied unchanged.
