@@ -309,11 +309,11 @@ class Fluid:
     surface_repulsion: bool = param(
         False,
         kind="bool",
-        doc="free-surface particles are pushed apart along the surface by the pressure range of "
-        "their neighbourhood, as the minimum-pressure gradient pushes interior particles apart "
-        "(this project's, docs/theory/fluid.md F10b): without it nothing holds surface "
-        "particles apart along the surface and still water's top row slides; on in the 2-D "
-        "presets",
+        doc="free-surface particles are pushed apart along the surface by the largest pressure "
+        "among their fluid neighbours, as the minimum-pressure gradient pushes interior "
+        "particles apart (this project's, docs/theory/fluid.md F10b): without it nothing holds "
+        "surface particles apart along the surface and still water's top row slides; on in the "
+        "2-D presets",
     )
     lattice: str = param(
         "square",
@@ -321,7 +321,8 @@ class Fluid:
         choices=("square", "hexagonal"),
         doc="initial arrangement of the particles: 'square' (cubic in 3-D), or 'hexagonal' "
         "(2-D fluid-only scenes): rows sqrt(3)/2 spacing apart, each particle with six "
-        "neighbours at one spacing; still water stays nearly still on it (docs/fluid.md)",
+        "neighbours at one spacing; with the surface repulsion still water stays still on it "
+        "(docs/fluid.md)",
     )
     solver: str = param(
         "iccg",

@@ -1070,12 +1070,11 @@ def pressure_correction(
     for a linear pressure when p_i is the least of its neighbourhood (the top layer under
     gravity), and otherwise off by the minimum-pressure term only.
     ``surface`` ((N,) bool, or None for none): the free-surface particles given the tangential
-    repulsion of Eq. (F10b), ``(p_max,i - p_i) sum_j (r_j - r_i) w / r_ij^2`` (p_max,i the
-    largest pressure among i's fluid neighbours within r_e,grad; the sum over its fluid and wall
-    neighbours there) with its component
-    along the surface normal removed; the normal is the direction away from the centroid of the
-    fluid and wall neighbours within the Laplacian radius, ``-sum_j (r_j - r_i) w(r, r_e,lap) / r``.
-    Other kinds are copied unchanged.
+    repulsion of Eq. (F10b), ``(p_max,i - p_i) sum_j (r_j - r_i) w / r_ij^2`` (the sum over i's
+    fluid and wall neighbours within r_e,grad, p_max,i the largest pressure among its fluid
+    neighbours there) with its component along the surface normal removed; the normal is the
+    direction away from the centroid of the fluid and wall neighbours within the Laplacian
+    radius, ``-sum_j (r_j - r_i) w(r, r_e,lap) / r``. Other kinds are copied unchanged.
     """
     n, dim = position.shape
     re = constants.re_gradient

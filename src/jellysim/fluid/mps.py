@@ -93,9 +93,9 @@ class MPSParameters:
       particle, whose PPE row (its neighbours nearly all on the free surface) then throws it off
       the floor; 0.8 l0 stops that without slowing the water behind (docs/fluid.md).
     - ``surface_repulsion``: free-surface fluid particles are pushed apart along the surface by
-      the pressure range of their neighbourhood, Eq. (F10b) (this project's; docs/theory/
-      fluid.md): with a Dirichlet p = 0 the minimum-pressure gradient repels nobody at the
-      surface, and still water's top row slides along it without this.
+      the largest pressure among their fluid neighbours, Eq. (F10b) (this project's;
+      docs/theory/fluid.md): with a Dirichlet p = 0 the minimum-pressure gradient repels nobody
+      at the surface, and still water's top row slides along it without this.
     - ``solver``: "iccg" (IC(0)-preconditioned CG), "cg" (plain CG, for comparison) or
       "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
       :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
