@@ -175,7 +175,7 @@ def test_hydrostatic_tank_on_the_hexagonal_lattice_stays_still() -> None:
     l0 = 0.005
     solver, largest, since, speed, mean, depth = still_hexagonal_tank(1.0, 0.3)
     fluid = solver.kind == FLUID
-    start_y = build(0.2, 0.2, 0.1, l0, "hexagonal", **HEXAGONAL).position[fluid, 1]
+    start_y = water_block(0, 0.2, 0, 0.1, l0, lattice="hexagonal")[:, 1]  # build's fluid, first
     below = start_y < depth - 1.5 * l0
     slope, intercept = np.polyfit(start_y[below], mean[fluid][below], 1)
     print(
