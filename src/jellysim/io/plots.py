@@ -204,6 +204,12 @@ class HydrostaticProfile(NamedTuple):
     frames: int
 
 
+def _weight_density(result: Result) -> float:
+    """rho g of the result's water (N/m3)."""
+    water = result.scene.water
+    return water.density * float(np.linalg.norm(water.gravity))
+
+
 def hydrostatic_profile(result: Result) -> HydrostaticProfile:
     """Average still water's pressure over the second half of the frames (at least the last one)
     and fit it by a line. A single frame is not enough: the MPS pressure of the 2-D presets
@@ -211,8 +217,7 @@ def hydrostatic_profile(result: Result) -> HydrostaticProfile:
     frames taken an odd number of steps apart alternate too; the average over the settled half
     of the run is the profile the validation test holds to rho g (H - y)."""
     f = result.file
-    scene = result.scene
-    rho_g = scene.water.density * float(np.linalg.norm(scene.water.gravity))
+    rho_g = _weight_density(result)
     count = len(result.time)
     first = min(count // 2, count - 1)
     fluid = np.asarray(f["fluid/kind"][:]) == 0
@@ -233,7 +238,7 @@ def hydrostatic_plot(result: Result, path: Path) -> Path:
     plt = _pyplot()
     depth = float(result.file.attrs["water_depth"])
     scene = result.scene
-    rho_g = scene.water.density * float(np.linalg.norm(scene.water.gravity))
+    rho_g = _weight_density(result)
     profile = hydrostatic_profile(result)
     fig, ax = plt.subplots(figsize=(5.6, 4.4), dpi=120)
     ax.plot(profile.pressure, profile.height, ".", ms=3, color="tab:blue", label="fluid particles")
