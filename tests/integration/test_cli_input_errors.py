@@ -272,6 +272,24 @@ def test_hexagonal_lattice_in_three_dimensions_is_refused(tmp_path: Path) -> Non
     )
 
 
+def test_fcc_lattice_in_two_dimensions_is_refused(tmp_path: Path) -> None:
+    """The face-centred cubic lattice is 3-D only: refused before anything is written."""
+    check_subprocess(
+        tmp_path,
+        ("run", "hydrostatic-2d", "--set", "fluid.lattice=fcc"),
+        ("fluid.lattice = 'fcc' is 3-D only", "'hexagonal'"),
+    )
+
+
+def test_soft_bell_on_the_fcc_lattice_is_refused(tmp_path: Path) -> None:
+    """The mass-spring bell is carved out of the cubic lattice: refused on the fcc one."""
+    check_subprocess(
+        tmp_path,
+        ("run", "moon-jelly", "--set", "fluid.lattice=fcc"),
+        ("fluid.lattice = 'fcc'", "fluid.lattice = 'square'"),
+    )
+
+
 def test_either_density_surface_without_the_mixed_source_is_refused(tmp_path: Path) -> None:
     """The either-density surface also tests n at the start of the step, which only the mixed
     source computes: refused before anything is written, naming the key to set."""

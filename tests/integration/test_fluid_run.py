@@ -196,3 +196,27 @@ def test_hydrostatic_preset_plots_the_hydrostatic_law(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     png = out / "plots" / "hydrostatic_pressure.png"
     assert png.stat().st_size > 10_000
+
+
+def test_hydrostatic_3d_preset_runs_and_plots(tmp_path: Path) -> None:
+    """``jellysim run hydrostatic-3d`` (shortened to 0.3 s) then ``jellysim plot``: 2,800
+    particles on the face-centred cubic lattice in 12 layers; the pressure averaged over the
+    second half follows rho g (H - z) within a few percent, its head at the top layer's centre
+    (the 1-s figures are in tests/validation/test_mps_fluid.py)."""
+    from jellysim.io.plots import hydrostatic_profile
+
+    out = tmp_path / "still3d"
+    done = _cli("run", "hydrostatic-3d", "--out", str(out), "--quiet", "--set", "duration=0.3")
+    assert done.returncode == 0, done.stderr
+    with jellysim.open_result(out) as result:
+        profile = hydrostatic_profile(result)
+        depth = float(result.file.attrs["water_depth"])
+        assert int(result.file.attrs["fluid_particles"]) == 2800
+        assert result.file["fluid/position"].shape[1:] == (len(result.file["fluid/kind"]), 3)
+        assert np.all(result.file["fluid/alive"][-1])
+    assert depth == pytest.approx(12 * (2.0 / 3.0) ** 0.5 * 0.005)
+    assert profile.slope == pytest.approx(1.0, rel=0.03)
+    assert profile.head == pytest.approx(depth - 0.5 * (2.0 / 3.0) ** 0.5 * 0.005, rel=0.02)
+    done = _cli("plot", str(out))
+    assert done.returncode == 0, done.stderr
+    assert (out / "plots" / "hydrostatic_pressure.png").stat().st_size > 10_000

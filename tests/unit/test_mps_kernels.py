@@ -21,6 +21,11 @@ SHELLS_3D_R31 = [(1, 6), (2, 12), (3, 8), (4, 6), (5, 24), (6, 24), (8, 12), (9,
 SHELLS_HEX_R21 = [(1, 6), (3, 6), (4, 6)]  # 18; sqrt(7) = 2.65 lies outside 2.1
 SHELLS_HEX_R31 = [(1, 6), (3, 6), (4, 6), (7, 12), (9, 6)]  # 36
 SHELLS_HEX_R40 = [(1, 6), (3, 6), (4, 6), (7, 12), (9, 6), (12, 6), (13, 12)]  # 54; 16 outside
+# Face-centred cubic lattice, nearest neighbours at l0: its points are the integer vectors of
+# even sum scaled by l0 / sqrt(2), so r^2 = (a^2 + b^2 + c^2) / 2 l0^2; the coordination shells
+# r^2 = 1 ... 9 hold 12, 6, 24, 12, 24, 8, 48, 6 and 36 points.
+SHELLS_FCC_R21 = [(1, 12), (2, 6), (3, 24), (4, 12)]  # 54; sqrt(5) = 2.236 lies outside 2.1
+SHELLS_FCC_R31 = SHELLS_FCC_R21 + [(5, 24), (6, 8), (7, 48), (8, 6), (9, 36)]  # 176
 
 
 def by_hand(shells: list[tuple[int, int]], re: float) -> tuple[float, float, int]:
@@ -70,6 +75,21 @@ def test_hexagonal_lattice_constants_against_hand_counts(re, shells) -> None:
     assert ref.lambda_ == pytest.approx(lam * l0**2, rel=1e-12)
 
 
+@pytest.mark.parametrize(("re", "shells"), [(2.1, SHELLS_FCC_R21), (3.1, SHELLS_FCC_R31)])
+def test_fcc_lattice_constants_against_hand_counts(re, shells) -> None:
+    """lattice_reference builds the fcc lattice from its (111) layers (the basis of
+    :mod:`jellysim.fluid.geometry`); the hand count uses the cubic description."""
+    l0 = 0.005
+    n0, lam, count = by_hand(shells, re)
+    ref = lattice_reference(3, l0, re, "fcc")
+    assert ref.count == count
+    assert ref.n0 == pytest.approx(n0, rel=1e-12)
+    assert ref.lambda_ == pytest.approx(lam * l0**2, rel=1e-12)
+    # 12 (re - 1) + 6 (re/sqrt(2) - 1) + 24 (re/sqrt(3) - 1) + 12 (re/2 - 1) at r_e = 2.1 l0
+    if re == 2.1:
+        assert ref.n0 == pytest.approx(21.807999010107643, rel=1e-12)
+
+
 def test_hexagonal_n0_literal() -> None:
     # 6 (re/1 - 1) + 6 (re/sqrt(3) - 1) + 6 (re/2 - 1) at r_e = 2.1 l0
     assert lattice_reference(2, 0.005, 2.1, "hexagonal").n0 == pytest.approx(8.174613391789288)
@@ -111,6 +131,47 @@ def test_lattice_stability_of_the_repulsion() -> None:
         assert least_stiffness("hexagonal", re) > -1e-9
 
 
+def least_stiffness_3d(lattice: str, re: float, samples: int = 17) -> float:
+    """:func:`least_stiffness` on the cubic ("square") or face-centred cubic lattice in 3-D,
+    over a grid of wave vectors with ``samples`` points per axis in [-2 pi, 2 pi] / l0."""
+    reach = int(math.ceil(2 * re)) + 1
+    axis = np.arange(-reach, reach + 1)
+    m = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3).astype(float)
+    if lattice == "fcc":
+        m1, m2, m3 = m.T
+        m = np.column_stack(
+            [
+                m1 + 0.5 * (m2 + m3),
+                math.sqrt(3.0) / 2.0 * (m2 + m3 / 3.0),
+                math.sqrt(2.0 / 3.0) * m3,
+            ]
+        )
+    r = np.sqrt((m**2).sum(axis=1))
+    points, r = m[(r > 0) & (r < re)], r[(r > 0) & (r < re)]
+    unit = points / r[:, None]
+    force = (re / r - 1.0) / r
+    slope = -2.0 * re / r**3 + 1.0 / r**2
+    outer = unit[:, :, None] * unit[:, None, :]
+    pair = -slope[:, None, None] * outer - (force / r)[:, None, None] * (np.eye(3) - outer)
+    k = np.linspace(-2 * np.pi, 2 * np.pi, samples)
+    waves = np.stack(np.meshgrid(k, k, k, indexing="ij"), axis=-1).reshape(-1, 3)
+    matrices = np.einsum("kp,pab->kab", 1.0 - np.cos(waves @ points.T), pair)
+    return float(np.linalg.eigvalsh(matrices)[:, 0].min())
+
+
+def test_lattice_stability_of_the_repulsion_in_3d() -> None:
+    """In 3-D the cubic lattice is as unstable as the square one (least eigenvalue -2.86 K/l0^2
+    at r_e = 2.1 l0). The face-centred cubic lattice is stable from r_e = 2.3 l0 on, but only
+    nearly so at the gradient's 2.1 l0 (-0.19 on this grid of wave vectors, fifteen times less
+    than the cubic lattice): its still water creeps, slowly (docs/theory/fluid.md)."""
+    assert least_stiffness_3d("square", 2.1) == pytest.approx(-2.8603, abs=1e-3)
+    cubic = least_stiffness_3d("square", 2.1)
+    assert 0.1 * cubic < least_stiffness_3d("fcc", 2.1) < -0.1
+    for re in (1.5, 2.3, 2.5, 3.1):
+        assert least_stiffness_3d("fcc", re) > -1e-9
+        assert least_stiffness_3d("square", re) < -0.1
+
+
 def test_hexagonal_lattice_is_two_dimensional() -> None:
     with pytest.raises(ValueError, match="2-D only"):
         MPSParameters(dim=3, l0=0.01, lattice="hexagonal")
@@ -122,9 +183,19 @@ def test_hexagonal_lattice_is_two_dimensional() -> None:
         MPSParameters(dim=2, l0=0.01, lattice="hexagonal", surface="neighbour-count")
 
 
+def test_fcc_lattice_is_three_dimensional() -> None:
+    with pytest.raises(ValueError, match="3-D only"):
+        MPSParameters(dim=2, l0=0.01, lattice="fcc")
+    with pytest.raises(ValueError, match="3-D only"):
+        lattice_reference(2, 0.01, 2.1, "fcc")
+    with pytest.raises(ValueError, match="3-D only"):
+        water_block(0, 0.04, 0, 0.02, 0.01, lattice="fcc")
+
+
 def test_surface_threshold_defaults_to_the_lattice() -> None:
     assert MPSParameters(dim=2, l0=0.01).beta == 0.97
     assert MPSParameters(dim=2, l0=0.01, lattice="hexagonal").beta == 0.93
+    assert MPSParameters(dim=3, l0=0.01, lattice="fcc").beta == 0.93
     assert MPSParameters(dim=2, l0=0.01, lattice="hexagonal", surface_threshold=0.9).beta == 0.9
     with pytest.raises(ValueError, match="2-D only"):
         tank(0.04, 0.03, 0.01, dim=3, inner_depth=0.02, lattice="hexagonal")
@@ -317,6 +388,47 @@ def test_hexagonal_tank_geometry() -> None:
     top, second = fluid[:, 1] > depth - row, np.abs(fluid[:, 1] - (depth - 1.5 * row)) < 0.1 * row
     np.testing.assert_allclose(n[top & middle] / n0, 0.6407, atol=1e-4)
     np.testing.assert_allclose(n[second & middle] / n0, 0.9618, atol=1e-4)
+
+
+def test_fcc_tank_geometry() -> None:
+    """The fcc tank and its water are one lattice: every particle's nearest neighbour is l0
+    away and a fluid particle away from the surface has twelve; each layer's rows hold
+    width / l0 fluid particles; the walls are the sites less than l0 behind a face, the dummies
+    those less than 3 l0 behind; walls with dummies complete the neighbourhood of every fluid
+    particle away from the free surface (n = n0); the top layer has 0.687 n0 and the second
+    0.964 n0 (above the threshold 0.93) away from the walls."""
+    l0 = 0.005
+    width, depth, height = 0.06, 0.04, 0.03
+    layer = math.sqrt(2.0 / 3.0) * l0
+    walls, kinds = tank(width, 0.045, l0, dim=3, inner_depth=depth, lattice="fcc")
+    fluid = water_block(0.0, width, 0.0, depth, l0, 0.0, height, lattice="fcc")
+    assert filled_height(height, l0, "fcc") == pytest.approx(7 * layer)  # round(0.03 / layer)
+    lower, upper = fluid.min(axis=0), fluid.max(axis=0)
+    assert np.all(lower > 0) and upper[0] < width and upper[1] < depth and upper[2] < height
+    layers = np.rint(fluid[:, 2] / layer - 0.5).astype(int)
+    assert np.array_equal(np.unique(layers), np.arange(7))
+    rows = np.rint(fluid[:, 1] / (math.sqrt(3.0) / 2.0 * l0) - layers / 3.0 - 1.0 / 6.0)
+    for key in set(zip(layers, rows.astype(int), strict=True)):
+        assert np.sum((layers == key[0]) & (rows == key[1])) == 12  # width / l0 a row
+    everything = np.vstack([fluid, walls])
+    distance = np.sqrt(((fluid[:, None] - everything[None]) ** 2).sum(-1))
+    distance[np.arange(len(fluid)), np.arange(len(fluid))] = np.inf
+    np.testing.assert_allclose(distance.min(axis=1), l0, rtol=1e-12)
+    count = (distance < 1.0001 * l0).sum(axis=1)
+    inside = fluid[:, 2] < height - 2 * layer
+    assert np.all(count[inside] == 12)
+    x, y, z = walls.T
+    behind = np.max(np.column_stack([-x, x - width, -y, y - depth, -z]), axis=1)
+    assert np.all((behind[kinds == WALL] > 0) & (behind[kinds == WALL] < l0))
+    assert np.all((behind[kinds == DUMMY] >= l0) & (behind[kinds == DUMMY] < 3 * l0))
+    n = np.where(distance < 2.1 * l0, 2.1 * l0 / distance - 1.0, 0.0).sum(axis=1)
+    n0 = lattice_reference(3, l0, 2.1, "fcc").n0
+    np.testing.assert_allclose(n[fluid[:, 2] < height - 3 * layer] / n0, 1.0, rtol=1e-12)
+    away = np.all(
+        (fluid[:, :2] > 2.5 * l0) & (fluid[:, :2] < [width - 2.5 * l0, depth - 2.5 * l0]), 1
+    )
+    np.testing.assert_allclose(n[away & (layers == 6)] / n0, 0.6874, atol=1e-4)
+    np.testing.assert_allclose(n[away & (layers == 5)] / n0, 0.9639, atol=1e-4)
 
 
 def _gradient_acceleration(

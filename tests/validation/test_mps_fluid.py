@@ -1,5 +1,5 @@
-"""MPS fluid validation: hydrostatic pressure in a 2-D tank and the 2-D dam break against
-Martin & Moyce (1952)."""
+"""MPS fluid validation: hydrostatic pressure and still water in 2-D and 3-D tanks, and the 2-D
+dam break against Martin & Moyce (1952)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 
-from jellysim.fluid.geometry import FLUID, filled_height, tank, water_block
+from jellysim.fluid.geometry import FLUID, ROW_HEIGHT, filled_height, tank, water_block
 from jellysim.fluid.mps import MPSParameters, MPSSolver
 from jellysim.reference import front_errors, surge_front
 
@@ -191,6 +191,70 @@ def test_hydrostatic_tank_on_the_hexagonal_lattice_stays_still() -> None:
     _, sliding, _, _, _, _ = still_hexagonal_tank(1.0, 0.3, surface_repulsion=False)
     print(f"without the surface repulsion: largest drift {sliding:.3f} l0 over the run")
     assert sliding > 2 * largest
+
+
+def still_3d_tank(seconds: float, lattice: str) -> tuple[MPSSolver, np.ndarray, float, float]:
+    """hydrostatic-3d's tank (0.1 x 0.05 m, water 0.05 m deep, l0 = 5 mm) on ``lattice`` with
+    the 2-D presets' scheme, ``seconds`` from rest. Returns the solver, its start positions,
+    the largest drift of a fluid particle over the run (l0, every step) and the RMS speed of
+    the fluid averaged over the steps of the second half (m/s); the solver's ``pressure`` is
+    replaced by its average over the same steps."""
+    l0 = 0.005
+    walls, wall_kinds = tank(0.1, 0.07, l0, dim=3, inner_depth=0.05, lattice=lattice)
+    fluid = water_block(0, 0.1, 0, 0.05, l0, 0, 0.05, lattice=lattice)
+    positions = np.vstack([fluid, walls])
+    kinds = np.concatenate([np.full(len(fluid), FLUID, dtype=np.int8), wall_kinds])
+    params = MPSParameters(dim=3, l0=l0, lattice=lattice, solver="deflated", **HEXAGONAL)  # type: ignore[arg-type]
+    solver = MPSSolver(params, positions, kinds)
+    water = solver.kind == FLUID
+    start = solver.position.copy()
+    total = np.zeros(solver.pressure.shape)
+    largest = speed = 0.0
+    samples = 0
+    while solver.time < seconds - 1e-12:
+        solver.step(min(solver.stable_dt(), seconds - solver.time))
+        moved = np.sqrt(((solver.position - start) ** 2).sum(axis=1))[water].max() / l0
+        largest = max(largest, moved)
+        if solver.time > 0.5 * seconds:
+            total += solver.pressure
+            speed += float(np.sqrt((solver.velocity[water] ** 2).sum(axis=1).mean()))
+            samples += 1
+    solver.pressure[:] = total / samples
+    return solver, start, largest, speed / samples
+
+
+def test_hydrostatic_tank_in_3d_on_the_fcc_lattice_stays_still() -> None:
+    """The hydrostatic-3d set-up (2,800 particles on the face-centred cubic lattice, 12 layers),
+    1 s from rest. Measured 2026-11-25: the largest drift of any particle over the run 0.46 l0
+    (top-layer particles by the side walls, which move about 0.25 l0 in and 0.2 l0 down, and the
+    bottom corners), 0.34 l0 at 1 s, the mean drift 0.087 l0 (0.107 at 2 s, a slow creep: the
+    lattice is nearly but not quite stable under the gradient at r_e = 2.1 l0,
+    test_mps_kernels.py), the RMS speed 2.8 mm/s (mean over 0.5-1 s), most of it in the top
+    layer's step-to-step motion. The pressure averaged over 0.5-1 s, fitted below the top
+    2 l0, follows rho g (h - z): slope 1.012 rho g, head 0.0467 m, the top layer's centre
+    (0.0470 m; the 12 layers fill 0.0490 m). The same tank on the cubic lattice drifts 1.87 l0
+    by 0.5 s (2.5 l0 at 1 s, mean 0.74 l0, 18 mm/s in a scratch run)."""
+    l0 = 0.005
+    solver, start, largest, speed = still_3d_tank(1.0, "fcc")
+    water = solver.kind == FLUID
+    z = start[water, 2]
+    drift = np.sqrt(((solver.position - start) ** 2).sum(axis=1))[water] / l0
+    top = z.max()
+    below = z < top - 2.0 * l0
+    slope, intercept = np.polyfit(z[below], solver.pressure[water][below], 1)
+    print(
+        f"fcc, 1 s: largest drift {largest:.3f} l0 over the run, {drift.max():.3f} l0 at the end, "
+        f"mean {drift.mean():.4f} l0; RMS speed {speed * 1e3:.2f} mm/s; pressure slope "
+        f"{-slope / (DENSITY * GRAVITY):.4f} rho g, head {intercept / -slope:.5f} m (top "
+        f"layer's centre {top:.5f} m, filled height {top + 0.5 * ROW_HEIGHT['fcc'] * l0:.5f} m)"
+    )
+    assert solver.alive.all()
+    assert -slope == pytest.approx(DENSITY * GRAVITY, rel=0.03)
+    assert intercept / -slope == pytest.approx(top, rel=0.02)
+    assert largest < 0.6 and drift.max() < 0.45 and drift.mean() < 0.15 and speed < 0.005
+    _, _, cubic, _ = still_3d_tank(0.5, "square")
+    print(f"cubic, 0.5 s: largest drift {cubic:.3f} l0 over the run")
+    assert cubic > 3 * largest
 
 
 def test_dam_break_mixed_source_with_corrected_gradient() -> None:

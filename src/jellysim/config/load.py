@@ -252,6 +252,11 @@ def _check_soft_bell(scene: Scene) -> None:
         )
     if b.lobes > 0:
         raise InputError("bell.lobes: the mass-spring bell has a round margin; set bell.lobes = 0")
+    if f.lattice != "square":
+        raise InputError(
+            f"fluid.lattice = {f.lattice!r}: the mass-spring bell is carved out of the cubic "
+            "lattice; set fluid.lattice = 'square'"
+        )
     cells = b.margin_height / f.spacing
     if abs(cells - round(cells)) > 1e-6 * max(1.0, cells):
         raise InputError(
@@ -292,8 +297,13 @@ def _check_fluid(scene: Scene) -> None:
         )
     if f.lattice == "hexagonal" and f.dimensions != 2:
         raise InputError(
-            "fluid.lattice = 'hexagonal' is 2-D only: set fluid.dimensions = 2 or "
-            "fluid.lattice = 'square'"
+            "fluid.lattice = 'hexagonal' is 2-D only: set fluid.dimensions = 2, or "
+            "fluid.lattice = 'fcc' (its 3-D analogue) or 'square'"
+        )
+    if f.lattice == "fcc" and f.dimensions != 3:
+        raise InputError(
+            "fluid.lattice = 'fcc' is 3-D only: set fluid.dimensions = 3, or "
+            "fluid.lattice = 'hexagonal' (its 2-D analogue) or 'square'"
         )
     lengths = ["tank_width", "tank_height", "water_height"]
     if f.geometry == "dam-break":

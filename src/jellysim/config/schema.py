@@ -296,7 +296,8 @@ class Fluid:
         lt=1.0,
         nullable=True,
         doc="beta: a particle with n < beta n0 is on the free surface (default: 0.97 on the "
-        "square lattice, 0.93 on the hexagonal one, whose second row has n = 0.962 n0)",
+        "square lattice, 0.93 on the hexagonal and fcc ones, whose second row or layer has "
+        "n = 0.962 or 0.964 n0)",
     )
     collision_distance: float = param(
         0.5,
@@ -318,10 +319,13 @@ class Fluid:
     lattice: str = param(
         "square",
         kind="choice",
-        choices=("square", "hexagonal"),
-        doc="initial arrangement of the particles: 'square' (cubic in 3-D), or 'hexagonal' "
-        "(2-D fluid-only scenes): rows sqrt(3)/2 spacing apart, each particle with six "
-        "neighbours at one spacing; with the surface repulsion still water stays still on it "
+        choices=("square", "hexagonal", "fcc"),
+        doc="initial arrangement of the particles: 'square' (cubic in 3-D); 'hexagonal' (2-D "
+        "fluid-only scenes): rows sqrt(3)/2 spacing apart, each particle with six neighbours at "
+        "one spacing; 'fcc' (3-D fluid-only scenes): face-centred cubic, its close-packed "
+        "layers horizontal sqrt(2/3) spacing apart, each particle with twelve neighbours at one "
+        "spacing. The square and cubic lattices are unstable to shear under the pressure "
+        "gradient; with the surface repulsion still water stays still on the other two "
         "(docs/fluid.md)",
     )
     solver: str = param(

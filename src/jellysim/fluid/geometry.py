@@ -1,5 +1,6 @@
 """Initial particle arrangements for MPS on a square (2-D) or cubic (3-D) lattice of spacing l0,
-or on the hexagonal (triangular) lattice of spacing l0 in 2-D.
+on the hexagonal (triangular) lattice of spacing l0 in 2-D, or on the face-centred cubic lattice
+of nearest-neighbour distance l0 in 3-D.
 
 Cell-centred convention: space is cut into cells of side l0 with faces on the planes ``i l0``, and
 every particle sits at a cell centre ``(i + 1/2) l0``, standing for that cell's volume. The inner
@@ -21,6 +22,20 @@ again holds ``a / l0`` particles a row and a height ``H`` the ``round(H / h)`` r
 centres lie below it (:func:`filled_height`), for blocks whose sides are whole numbers of l0
 from the walls (as in every scene).
 Why this lattice: docs/theory/fluid.md, "The lattice".
+
+Face-centred cubic lattice (``lattice="fcc"``, 3-D), the hexagonal lattice's analogue in 3-D,
+with its close-packed (111) planes horizontal: layers ``h_z = sqrt(2/3) l0`` apart, layer k
+centred at ``z = (k + 1/2) h_z``, each a hexagonal lattice of spacing l0 with rows along x,
+``h_y = (sqrt(3)/2) l0`` apart; layer k is shifted by a third of the triangle against the layer
+below (ABC stacking). The site (i, j, k) is at ``x = (i + (j + k)/2 + 1/4) l0``,
+``y = (j + k/3 + 1/6) h_y``, ``z = (k + 1/2) h_z``: every site has twelve neighbours at l0, a row
+of a block whose width is a whole number of l0 holds width / l0 sites (l0 / 4 left or right of
+the middle), and the rows nearest a y face lie 1/6, 1/2 or 5/6 of h_y inside it, by layer. The
+tank's walls and dummies are the lattice's own sites behind its faces: a site less than l0
+behind a face (the larger of its distances behind the faces it is behind) is a wall, one less
+than 3 l0 behind a dummy (one layer of walls and three of dummies under the floor). A water block
+takes the sites whose centres lie inside it; its height is the ``round(H / h_z)`` layers centred
+below H (:func:`filled_height`).
 """
 
 from __future__ import annotations
@@ -28,8 +43,10 @@ from __future__ import annotations
 import numpy as np
 
 FLUID, WALL, DUMMY = 0, 1, 2  # particle kinds (stored as int8)
-LATTICES = ("square", "hexagonal")
-ROW_HEIGHT = {"square": 1.0, "hexagonal": 0.5 * np.sqrt(3.0)}  # row spacing over l0
+LATTICES = ("square", "hexagonal", "fcc")
+# vertical spacing of the rows (2-D) or layers (3-D) over l0
+ROW_HEIGHT = {"square": 1.0, "hexagonal": 0.5 * np.sqrt(3.0), "fcc": np.sqrt(2.0 / 3.0)}
+DIMENSIONS = {"hexagonal": 2, "fcc": 3}  # lattices that exist in one dimension only
 
 _TOLERANCE = 1e-9  # in l0: cell centres on a block's boundary count as inside
 
@@ -58,12 +75,20 @@ def tank(
     floor to ``inner_height`` (their top cell's centre is half a spacing below it). ``inner_width``,
     ``inner_height`` (and ``inner_depth`` in 3-D) must be whole multiples of l0 (on the hexagonal
     lattice the walls rise to the last row centred below ``inner_height``, which is not checked).
-    ``lattice``: "square" (cubic in 3-D) or "hexagonal" (2-D only; the module's docstring).
+    ``lattice``: "square" (cubic in 3-D), "hexagonal" (2-D only) or "fcc" (3-D only; the
+    module's docstring: there ``wall_layers`` and ``dummy_layers`` count l0 behind the faces).
     """
     if dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3, not {dim}")
-    if _hexagonal(lattice, dim):
+    check_lattice(lattice, dim)
+    if lattice == "hexagonal":
         return _hexagonal_tank(inner_width, inner_height, l0, wall_layers, dummy_layers)
+    if lattice == "fcc":
+        if inner_depth is None:
+            raise ValueError("a 3-D tank needs inner_depth")
+        return _fcc_tank(
+            (_cells(inner_width, l0) * l0, inner_depth), inner_height, l0, wall_layers, dummy_layers
+        )
     layers = wall_layers + dummy_layers
     horizontal = [_cells(inner_width, l0)]
     if dim == 3:
@@ -96,9 +121,14 @@ def water_block(
 ) -> np.ndarray:
     """Fluid positions ``(N, dim)`` m: the cell centres ``(i + 1/2) l0`` inside the box
     ``[x0, x1] x [y0, y1]`` (``x [z0, z1]`` in 3-D, when z0 and z1 are given). The last
-    coordinate is up. On the ``"hexagonal"`` lattice (2-D only), its sites inside the box."""
-    if _hexagonal(lattice, 2 if z0 is None or z1 is None else 3):
+    coordinate is up. On the ``"hexagonal"`` (2-D) or ``"fcc"`` (3-D) lattice, its sites inside
+    the box."""
+    check_lattice(lattice, 2 if z0 is None or z1 is None else 3)
+    if lattice == "hexagonal":
         return _hexagonal_block(x0, x1, y0, y1, l0)
+    if lattice == "fcc" and z0 is not None and z1 is not None:
+        sites = _fcc_sites(np.array([x0, y0, z0]), np.array([x1, y1, z1]), l0)
+        return sites[_inside(sites, np.array([x0, y0, z0]), np.array([x1, y1, z1]), l0)]
     bounds = [(x0, x1), (y0, y1)]
     if z0 is not None and z1 is not None:
         bounds.append((z0, z1))
@@ -115,7 +145,7 @@ def filled_height(height: float, l0: float, lattice: str = "square") -> float:
     """The height (m) that a block from the floor to ``height`` fills on the lattice: its rows
     (those whose centres lie below ``height``) times the row spacing; on the square lattice
     ``height`` itself (a whole number of l0, checked by the scene)."""
-    if not _hexagonal(lattice, 2):
+    if lattice == "square":
         return height
     row = ROW_HEIGHT[lattice] * l0
     return _rows_below(height, row) * row
@@ -125,13 +155,8 @@ def check_lattice(lattice: str, dim: int) -> None:
     """Raise ValueError unless ``lattice`` is one of LATTICES and exists in ``dim`` dimensions."""
     if lattice not in LATTICES:
         raise ValueError(f"lattice = {lattice!r}; allowed: {', '.join(LATTICES)}")
-    if lattice == "hexagonal" and dim != 2:
-        raise ValueError("the hexagonal lattice is 2-D only")
-
-
-def _hexagonal(lattice: str, dim: int) -> bool:
-    check_lattice(lattice, dim)
-    return lattice == "hexagonal"
+    if DIMENSIONS.get(lattice, dim) != dim:
+        raise ValueError(f"the {lattice} lattice is {DIMENSIONS[lattice]}-D only")
 
 
 def _rows_below(height: float, row: float) -> int:
@@ -175,3 +200,49 @@ def _hexagonal_block(x0: float, x1: float, y0: float, y1: float, l0: float) -> n
     x = sites[:, 0]
     inside = (x >= x0 - _TOLERANCE * l0) & (x <= x1 + _TOLERANCE * l0)
     return sites[inside]
+
+
+def _inside(sites: np.ndarray, lower: np.ndarray, upper: np.ndarray, l0: float) -> np.ndarray:
+    """Sites whose centres lie in the box (centres on its boundary count as inside)."""
+    tolerance = _TOLERANCE * l0
+    return np.all((sites >= lower - tolerance) & (sites <= upper + tolerance), axis=1)
+
+
+def _fcc_sites(lower: np.ndarray, upper: np.ndarray, l0: float) -> np.ndarray:
+    """Sites of the face-centred cubic lattice (the module's docstring) in the box, as (N, 3) m,
+    layer by layer."""
+    row, layer = ROW_HEIGHT["hexagonal"] * l0, ROW_HEIGHT["fcc"] * l0
+    out = []
+    for k in range(int(np.floor(lower[2] / layer - 0.5)), int(np.ceil(upper[2] / layer)) + 1):
+        z = (k + 0.5) * layer
+        if not lower[2] - _TOLERANCE * l0 <= z <= upper[2] + _TOLERANCE * l0:
+            continue
+        shift = k / 3.0 + 1.0 / 6.0
+        rows = np.arange(int(np.floor(lower[1] / row - shift)), int(np.ceil(upper[1] / row)) + 1)
+        columns = np.arange(int(np.floor(lower[0] / l0)) - 1, int(np.ceil(upper[0] / l0)) + 2)
+        i, j = (a.ravel() for a in np.meshgrid(columns, rows, indexing="ij"))
+        x = (
+            i + 0.5 * ((j + k) % 2) + 0.25
+        ) * l0  # i counts whole l0 (the (i, j, k) above, re-indexed)
+        keep = (x >= lower[0] - _TOLERANCE * l0) & (x <= upper[0] + _TOLERANCE * l0)
+        out.append(np.column_stack([x[keep], (j[keep] + shift) * row, np.full(keep.sum(), z)]))
+    return np.concatenate(out) if out else np.empty((0, 3))
+
+
+def _fcc_tank(
+    inner: tuple[float, float],
+    inner_height: float,
+    l0: float,
+    wall_layers: int,
+    dummy_layers: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    thickness = (wall_layers + dummy_layers) * l0
+    width, depth = inner
+    lower = np.array([-thickness, -thickness, -thickness])
+    upper = np.array([width + thickness, depth + thickness, inner_height])
+    sites = _fcc_sites(lower, upper, l0)
+    x, y, z = sites.T
+    behind = np.max(np.column_stack([-x, x - width, -y, y - depth, -z]), axis=1)
+    keep = (behind > _TOLERANCE * l0) & (behind < thickness - _TOLERANCE * l0)
+    kinds = np.where(behind[keep] < wall_layers * l0, WALL, DUMMY).astype(np.int8)
+    return sites[keep], kinds

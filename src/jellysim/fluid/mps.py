@@ -40,7 +40,9 @@ GRADIENTS = ("standard", "corrected")
 # the neighbour two spacings up). On the hexagonal lattice the second row misses three (one at
 # sqrt(3) l0, two at 2 l0): n = 0.962 n0, under 0.97, so that row would flicker between the
 # surface and the interior; 0.93 leaves it 3 % of margin, the surface row (0.64 n0) far below.
-SURFACE_THRESHOLD = {"square": 0.97, "hexagonal": 0.93}
+# On the face-centred cubic lattice the second layer under a flat (111) surface misses six
+# neighbours (at sqrt(8/3) and 2 l0): n = 0.964 n0; the surface layer has 0.69 n0. Same 0.93.
+SURFACE_THRESHOLD = {"square": 0.97, "hexagonal": 0.93, "fcc": 0.93}
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
 # PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
@@ -113,8 +115,9 @@ class MPSParameters:
     - ``acceleration_number`` kappa: the acceleration limit ``dt <= kappa sqrt(l0 / a)``, i.e. a
       particle at rest moves ``kappa^2 l0 / 2`` in a step; None: ``sqrt(courant)``.
     - ``lattice``: the initial arrangement whose neighbourhood defines n0 and lambda (Eq.
-      F2-F3): "square" (cubic in 3-D) or "hexagonal" (2-D only,
-      :mod:`jellysim.fluid.geometry`). The particles must be built on the same lattice.
+      F2-F3): "square" (cubic in 3-D), "hexagonal" (2-D only) or "fcc" (face-centred cubic,
+      3-D only; :mod:`jellysim.fluid.geometry`). The particles must be built on the same
+      lattice.
     - ``domain_min``/``domain_max`` (m): particles leaving the box die (``alive`` False). None:
       the initial particles' bounding box widened by its own size on every side.
     """
@@ -213,9 +216,10 @@ class LatticeReference:
 def lattice_reference(dim: int, l0: float, re: float, lattice: str = "square") -> LatticeReference:
     """n0 = sum_j w(r_j), lambda = sum_j w r_j^2 / sum_j w over the lattice points r_j != 0 with
     ``|r_j| < re l0``: on the square/cubic lattice ``r_j = l0 m`` (integer m), on the hexagonal
-    one (2-D) ``r_j = l0 (m_1 + m_2 / 2, m_2 sqrt(3) / 2)``."""
+    one (2-D) ``r_j = l0 (m_1 + m_2 / 2, m_2 sqrt(3) / 2)``, on the face-centred cubic one (3-D)
+    ``r_j = l0 (m_1 + m_2 / 2 + m_3 / 2, (m_2 + m_3 / 3) sqrt(3) / 2, m_3 sqrt(2/3))``."""
     check_lattice(lattice, dim)
-    # m_1 reaches |m_1 + m_2 / 2| + |m_2| / 2 on the hexagonal lattice
+    # a lattice point within re l0 has integer coordinates of at most 2 re + 1 in these bases
     reach = int(math.ceil(re)) if lattice == "square" else int(math.ceil(2.0 * re)) + 1
     axis = np.arange(-reach, reach + 1)
     offsets = np.stack(np.meshgrid(*([axis] * dim), indexing="ij"), axis=-1).reshape(-1, dim)
@@ -223,6 +227,15 @@ def lattice_reference(dim: int, l0: float, re: float, lattice: str = "square") -
     if lattice == "hexagonal":
         offsets = np.column_stack(
             [offsets[:, 0] + 0.5 * offsets[:, 1], ROW_HEIGHT["hexagonal"] * offsets[:, 1]]
+        )
+    elif lattice == "fcc":
+        m1, m2, m3 = offsets.T
+        offsets = np.column_stack(
+            [
+                m1 + 0.5 * (m2 + m3),
+                ROW_HEIGHT["hexagonal"] * (m2 + m3 / 3.0),
+                ROW_HEIGHT["fcc"] * m3,
+            ]
         )
     norm = np.sqrt((offsets**2).sum(axis=1))  # in l0
     # points on the sphere r = re (4 l0 on both lattices) are outside, whatever the round-off

@@ -243,7 +243,8 @@ def hydrostatic_plot(result: Result, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(5.6, 4.4), dpi=120)
     ax.plot(profile.pressure, profile.height, ".", ms=3, color="tab:blue", label="fluid particles")
     y = np.linspace(0.0, depth, 50)
-    ax.plot(rho_g * (depth - y), y, color="k", lw=1.4, label=f"ρ g (H − y), H = {depth:.4f} m")
+    up = "z" if result.file["fluid/position"].shape[-1] == 3 else "y"
+    ax.plot(rho_g * (depth - y), y, color="k", lw=1.4, label=f"ρ g (H − {up}), H = {depth:.4f} m")
     ax.plot(
         profile.slope * rho_g * (profile.head - y),
         y,

@@ -27,7 +27,8 @@ log = logging.getLogger(__name__)
 def fluid_particles(scene: Scene) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
     """The tank and its water: positions (N, D) m, kinds (N,) and the case geometry attributes
     of DESIGN §3 (left inner wall at x = 0, floor at 0 along the last axis). On the hexagonal
-    lattice the height attribute is the height the water's rows fill (:func:`filled_height`)."""
+    and fcc lattices the height attribute is the height the water's rows or layers fill
+    (:func:`filled_height`)."""
     f = scene.fluid
     dim, l0 = f.dimensions, f.spacing
     walls, kinds = tank(
@@ -43,7 +44,9 @@ def fluid_particles(scene: Scene) -> tuple[np.ndarray, np.ndarray, dict[str, flo
     if dim == 2:
         water = water_block(0.0, width, 0.0, f.water_height, l0, lattice=f.lattice)
     else:
-        water = water_block(0.0, width, 0.0, f.tank_depth, l0, 0.0, f.water_height)
+        water = water_block(
+            0.0, width, 0.0, f.tank_depth, l0, 0.0, f.water_height, lattice=f.lattice
+        )
     positions = np.concatenate([water, walls])
     all_kinds = np.concatenate([np.full(len(water), FLUID, dtype=np.int8), kinds])
     if f.geometry == "dam-break":
