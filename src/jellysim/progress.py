@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from typing import Any
+
+DELAY_ENV = "JELLYSIM_PROGRESS_DELAY"  # seconds before a bar appears, overriding each caller's
 
 
 class _NoBar:
@@ -21,9 +24,11 @@ class _NoBar:
 
 def progress(total: int, done: int, quiet: bool, what: str, delay: float = 0.0) -> Any:
     """A context manager with ``update(n)``: a tqdm bar of ``total`` frames, ``done`` of them
-    already done (a resumed run), shown after ``delay`` seconds; nothing when ``quiet``."""
+    already done (a resumed run), shown after ``delay`` seconds (``$JELLYSIM_PROGRESS_DELAY``
+    when set to a number of seconds); nothing when ``quiet``."""
     if quiet:
         return _NoBar()
+    delay = _delay_from_environment(delay)
     from tqdm import tqdm
 
     return tqdm(
@@ -35,3 +40,13 @@ def progress(total: int, done: int, quiet: bool, what: str, delay: float = 0.0) 
         dynamic_ncols=True,
         desc=what,
     )
+
+
+def _delay_from_environment(default: float) -> float:
+    """``$JELLYSIM_PROGRESS_DELAY`` as seconds (0 shows every bar at once), else ``default``;
+    a value that is not a number, or is negative, is ignored."""
+    try:
+        value = float(os.environ[DELAY_ENV])
+    except (KeyError, ValueError):
+        return default
+    return value if value >= 0 else default

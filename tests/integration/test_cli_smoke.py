@@ -18,7 +18,7 @@ import pytest
 import jellysim
 
 QUICK = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
-# About 240 frames of 1100 substeps: some 5 s, well past the progress bar's 2 s delay.
+# About 240 frames of some 1,600 substeps: a few seconds, long enough for the bar to update.
 LONG = [
     "duration=8",
     "tentacles.count=2",
@@ -185,7 +185,9 @@ def test_invalid_set_exits_2_and_writes_nothing(tmp_path: Path) -> None:
         assert not out.exists()
 
 
-def test_progress_bar_and_quiet(tmp_path: Path) -> None:
+def test_progress_bar_and_quiet(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The bar waits 2 s before it appears; a fast machine finishes LONG sooner than that.
+    monkeypatch.setenv("JELLYSIM_PROGRESS_DELAY", "0")
     loud = _cli("run", "brown-jelly", "--out", str(tmp_path / "loud"), *_sets(LONG))
     assert loud.returncode == 0, loud.stderr
     assert "simulating" in loud.stderr and "%" in loud.stderr, loud.stderr[-2000:]
