@@ -1,4 +1,4 @@
-"""The progress bar's delay: the callers' default, or $JELLYSIM_PROGRESS_DELAY when it is a number."""
+"""The progress bar's delay: the default, or $JELLYSIM_PROGRESS_DELAY when it is a number."""
 
 from __future__ import annotations
 
