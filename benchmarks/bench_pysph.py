@@ -19,7 +19,9 @@ T = t sqrt(2 g / a) = 3.3, both codes on the same number of threads, one after t
 - PySPH: its example dam_break_2d (a = 1 m; in a 5a tank, like jellysim's, since 2026-11-25: the
   example's 4a tank caps its front at T = 2.93; WCSPH with its adaptive step) at
   dx = a / N, run in PySPH's own venv by benchmarks/pysph_dam_break.py; the front at 200
-  outputs. Its block has N + 1 particles across (both ends included).
+  outputs. Its column is N x 2N particles, a x 2a like jellysim's, since 2026-11-25
+  (``--pysph-block example``: the example's own N + 1 x 2N + 1, a column one spacing wider
+  and taller, whose front leads by about 1/N of a).
 
 Both fronts are measured the same way (jellysim.reference: the largest x of fluid particles
 within 0.1 a of the floor, from the wall's inner face, over a) and compared with Martin & Moyce
@@ -96,13 +98,16 @@ def run_mps(
     }
 
 
-def run_pysph(python: str, per_width: int, threads: int, scheme: str) -> dict[str, object] | str:
+def run_pysph(
+    python: str, per_width: int, threads: int, scheme: str, block: str = "exact"
+) -> dict[str, object] | str:
     """PySPH's result, or why it has none (a scheme that does not finish is reported, not
     fatal: PySPH 1.0b2's WCSPH crashes at 80 particles across a)."""
     with tempfile.TemporaryDirectory() as out:
         command = [
             python, str(HERE / "pysph_dam_break.py"), "--per-width", str(per_width),
             "--until", str(UNTIL), "--threads", str(threads), "--scheme", scheme, "--out", out,
+            "--block", block,
         ]  # fmt: skip
         env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
         clock = time.perf_counter()
@@ -140,6 +145,11 @@ def main() -> None:
     parser.add_argument("--solver", choices=("iccg", "cg", "deflated"), help="MPS PPE solver")
     parser.add_argument("--pysph", default=str(HERE.parent / ".venv-pysph" / "bin" / "python"))
     parser.add_argument(
+        "--pysph-block", choices=("exact", "example"), default="exact",
+        help="PySPH's column: N x 2N particles, a x 2a like jellysim's (exact), or its example's "
+        "N + 1 x 2N + 1, (a + dx) x (2a + dx)",
+    )  # fmt: skip
+    parser.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE",
         help="a scene override for jellysim, e.g. fluid.lattice=square",
     )  # fmt: skip
@@ -172,7 +182,9 @@ def main() -> None:
             report(name, run_mps(per_width, args.solver, args.set))
         for scheme in [] if args.no_pysph else args.scheme or ["wcsph"]:
             name = f"PySPH {scheme.upper()}, {per_width}"
-            report(name, run_pysph(args.pysph, per_width, args.threads, scheme))
+            if args.pysph_block != "exact":
+                name += f" ({args.pysph_block} block)"
+            report(name, run_pysph(args.pysph, per_width, args.threads, scheme, args.pysph_block))
 
 
 if __name__ == "__main__":

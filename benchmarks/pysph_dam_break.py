@@ -4,12 +4,16 @@
 
 Runs `pysph.examples.dam_break_2d` (Martin & Moyce's n^2 = 2 column, a = 1 m) with the scheme
 named by ``--scheme`` (default wcsph, PySPH's fastest for it) at dx = a / N, to
-T = t sqrt(2 g / a) = ``--until``. Three changes to the example, which are what a resolution
+T = t sqrt(2 g / a) = ``--until``. Four changes to the example, which are what a resolution
 study against jellysim needs and change nothing else: its particles take the module-level h and
 mass of the default dx = 0.03 whatever ``--dx`` says, so they are reset from dx here; the final
-time is set from T; and the tank is ``--tank`` a long (default 5, jellysim's preset) instead of
+time is set from T; the tank is ``--tank`` a long (default 5, jellysim's preset) instead of
 the example's 4: in a 4a tank the front reaches the far wall at T = 2.93, before the last point
-of the comparison (T = 2.98), which caps PySPH's front there and flatters its raw error. The
+of the comparison (T = 2.98), which caps PySPH's front there and flatters its raw error; and the
+column is N x 2N particles (``--block exact``, the default), a x 2a like jellysim's, where the
+example's block has N + 1 x 2N + 1 (both ends of [0, a] and [0, 2a] included, ``--block
+example``): with each particle's area dx^2 that column is (a + dx) x (2a + dx), 1/N wider and
+1/(2N) taller than a, and its front, measured over a, leads by about 1/N of a from the start. The
 set-up (which compiles PySPH's generated code) is not timed; the solve is. Prints one JSON line:
 wall seconds, steps, fluid particles, and the surge front (the largest x of fluid particles
 within 0.1 a of the floor, measured from the wall's inner face, over a) at every output. This
@@ -24,15 +28,27 @@ import math
 import os
 import time
 
+import numpy as np
 import pysph.examples.dam_break_2d as example
 from pysph.solver.utils import iter_output
 
 WIDTH = example.fluid_column_width  # a = 1 m
 build_tank = example.get_2d_tank
+build_block = example.get_2d_block
+
+
+def exact_block(dx, length, height, center):  # type: ignore[no-untyped-def]
+    """round(length / dx) x round(height / dx) particles dx apart, the first at the block's
+    lower-left corner (the example then moves the block by dx along both axes): a column whose
+    particles' squares of side dx fill exactly length x height, like jellysim's."""
+    nx, ny = round(length / dx), round(height / dx)
+    x, y = np.meshgrid(np.arange(nx) * dx, np.arange(ny) * dx, indexing="ij")
+    return x.ravel() + center[0] - length / 2, y.ravel() + center[1] - height / 2
 
 
 class DamBreak(example.DamBreak2D):
     tank = 5.0  # in units of a; the inner left wall stays at x = 0
+    block = "exact"  # N x 2N particles (a x 2a), or "example": N + 1 x 2N + 1
 
     def create_particles(self):  # type: ignore[no-untyped-def]
         # The example builds its particle arrays from the module's h and m (for dx = 0.03),
@@ -46,6 +62,7 @@ class DamBreak(example.DamBreak2D):
             return build_tank(**kwargs)
 
         example.get_2d_tank = tank
+        example.get_2d_block = exact_block if self.block == "exact" else build_block
         return super().create_particles()
 
 
@@ -57,6 +74,10 @@ def main() -> None:
     parser.add_argument("--scheme", default="wcsph")
     parser.add_argument("--outputs", type=int, default=200)
     parser.add_argument("--tank", type=float, default=5.0, help="tank length in a (example: 4)")
+    parser.add_argument(
+        "--block", choices=("exact", "example"), default="exact",
+        help="the column: N x 2N particles, a x 2a (exact), or the example's N + 1 x 2N + 1",
+    )  # fmt: skip
     parser.add_argument("--out", required=True)
     args = parser.parse_args()
     os.environ["OMP_NUM_THREADS"] = str(args.threads)
@@ -65,6 +86,7 @@ def main() -> None:
     # WCSPH's first step is 0.125 h / c0; the adaptive step stays near it in this case.
     steps = final / (0.125 * example.hdx * dx / example.co)
     DamBreak.tank = args.tank
+    DamBreak.block = args.block
     app = DamBreak(fname="dam_break_2d")
     app.setup(
         [
