@@ -1,0 +1,51 @@
+"""The reference runs that gate behaviour-preserving work (issue 23): every preset, shrunk to a few
+coarse frames, and the scene-schema choices the presets do not exercise.
+
+Each case is a preset name and the overrides that shrink it. ``make_reference.py`` stores every
+dataset and root attribute of each case's ``result.h5`` under ``reference/``;
+``test_reference_runs.py`` re-runs the cases and compares them bit for bit.
+"""
+
+from __future__ import annotations
+
+from scenes import SMALL_MOON
+
+# A few frames of the soft bell at the tests' coarse scale (l0 = 0.25 m, 448 bell particles).
+_MOON_SHORT: dict[str, object] = {**SMALL_MOON, "duration": 0.2, "fps": 10.0}
+_DAM_COARSE: dict[str, object] = {"fluid.spacing": 0.01, "duration": 0.015, "fps": 200.0}
+
+CASES: dict[str, tuple[str, dict[str, object]]] = {
+    "brown-jelly": ("brown-jelly", {"duration": 0.1}),
+    "forced-tentacles": ("forced-tentacles", {"duration": 0.1}),
+    "forced-pinned-ewing": (
+        "forced-tentacles",
+        {"duration": 0.1, "tentacles.root": "pinned", "tentacles.bending": "ewing"},
+    ),
+    "dam-break-2d": ("dam-break-2d", _DAM_COARSE),
+    "dam-break-2d-square-cg": (
+        "dam-break-2d",
+        {
+            **_DAM_COARSE,
+            "fluid.lattice": "square",
+            "fluid.solver": "cg",
+            "fluid.source": "standard",
+            "fluid.surface": "standard",
+            "fluid.gradient": "corrected",
+        },
+    ),
+    "dam-break-2d-deflated": ("dam-break-2d", {**_DAM_COARSE, "fluid.solver": "deflated"}),
+    "hydrostatic-2d": ("hydrostatic-2d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
+    "hydrostatic-3d": ("hydrostatic-3d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
+    "tank-3d": ("tank-3d", {"fluid.spacing": 0.025, "duration": 0.04, "fps": 50.0}),
+    "moon-jelly": ("moon-jelly", _MOON_SHORT),
+    "moon-jelly-no-tentacles": ("moon-jelly", {**_MOON_SHORT, "tentacles.count": 0}),
+    "moon-jelly-implicit": (
+        "moon-jelly",
+        {**_MOON_SHORT, "bell.spring_integration": "implicit", "tentacles.count": 3},
+    ),
+    "moon-jelly-weightless": ("moon-jelly-weightless", _MOON_SHORT),
+    "moon-jelly-real-size": (
+        "moon-jelly-real-size",
+        {"duration": 0.1, "fps": 20.0, "tentacles.count": 4},
+    ),
+}

@@ -1,0 +1,57 @@
+"""Run a reference case and read back everything its result holds, as flat named arrays."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+import jellysim
+from regression.cases import CASES
+
+# Root attributes that name the software, not the behaviour.
+IGNORED_ATTRIBUTES = {"version"}
+
+
+def run_case(name: str, folder: Path) -> Path:
+    """Run case ``name`` into ``folder``; the path of its ``result.h5``."""
+    preset, overrides = CASES[name]
+    jellysim.run(jellysim.load_scene(preset, overrides), out=folder, force=True).close()
+    return folder / "result.h5"
+
+
+def read_all(path: Path) -> dict[str, np.ndarray]:
+    """Every dataset (``data:PATH``), its ``units`` (``units:PATH``) and every root attribute
+    (``attr:NAME``) of a result, as arrays."""
+    values: dict[str, np.ndarray] = {}
+    with h5py.File(path, "r", locking=False) as f:
+
+        def visit(name: str, item: object) -> None:
+            if isinstance(item, h5py.Dataset):
+                values[f"data:{name}"] = np.asarray(item[()])
+                values[f"units:{name}"] = np.asarray(str(item.attrs.get("units", "")))
+
+        f.visititems(visit)
+        for key, value in f.attrs.items():
+            if key not in IGNORED_ATTRIBUTES:
+                values[f"attr:{key}"] = np.asarray(value)
+    return values
+
+
+def differences(expected: dict[str, np.ndarray], actual: dict[str, np.ndarray]) -> list[str]:
+    """What differs, bit for bit (dtype, shape and bytes), one line per array."""
+    lines = [f"missing: {k}" for k in sorted(expected.keys() - actual.keys())]
+    lines += [f"new: {k}" for k in sorted(actual.keys() - expected.keys())]
+    for key in sorted(expected.keys() & actual.keys()):
+        a, b = expected[key], actual[key]
+        if a.dtype != b.dtype or a.shape != b.shape:
+            lines.append(f"{key}: {a.dtype}{a.shape} became {b.dtype}{b.shape}")
+        elif a.tobytes() != b.tobytes():
+            if a.dtype.kind == "f":
+                scale = np.nanmax(np.abs(a)) if a.size else 0.0
+                gap = np.nanmax(np.abs(a.astype(np.float64) - b)) if a.size else 0.0
+                lines.append(f"{key}: differs by up to {gap:.3g} (values up to {scale:.3g})")
+            else:
+                lines.append(f"{key}: differs in {int(np.sum(a != b))} of {a.size} entries")
+    return lines

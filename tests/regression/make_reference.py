@@ -1,0 +1,34 @@
+"""Store the reference runs of ``cases.py`` under ``reference/`` (one ``.npz`` per case).
+
+Run once, before a behaviour-preserving change, from the repository root:
+``.venv/bin/python tests/regression/make_reference.py [CASE ...]``. Re-storing a reference is a
+deliberate change of behaviour and is said so in its commit.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: scenes.py
+
+from regression.cases import CASES  # noqa: E402
+from regression.compare import read_all, run_case  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+
+
+def main(names: list[str]) -> None:
+    (HERE / "reference").mkdir(exist_ok=True)
+    for name in names or list(CASES):
+        with tempfile.TemporaryDirectory() as folder:
+            values = read_all(run_case(name, Path(folder)))
+        np.savez_compressed(HERE / "reference" / f"{name}.npz", **values)
+        print(f"{name}: {len(values)} arrays")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
