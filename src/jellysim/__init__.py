@@ -9,14 +9,13 @@ Python API (the same powers as the command line)::
         tip_x = r.tentacle_positions[:, 0, -1, 0]
 """
 
+from jellysim._version import __version__
 from jellysim.config import Scene, load_scene, scene_to_toml
 from jellysim.errors import InputError, JellysimError, SimulationUnstable
 from jellysim.interpolation import interpolate_result
 from jellysim.io.result import Result, open_result
 from jellysim.simulation import Simulation, run
 from jellysim.species import preset_names
-
-__version__ = "0.1.0"
 
 __all__ = [
     "InputError",

@@ -28,7 +28,7 @@ def _add_set_option(parser: argparse.ArgumentParser, metavar: str, help_text: st
 
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="jellysim", description="Simulate and animate jellyfish.")
-    from jellysim import __version__
+    from jellysim._version import __version__
 
     parser.add_argument("--version", action="version", version=f"jellysim {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)

@@ -311,7 +311,7 @@ def _plan_parts(source: _Source, frames: range, budget: int) -> list[range]:
 
 def generator() -> str:
     """The ``asset.generator`` string."""
-    from jellysim import __version__
+    from jellysim._version import __version__
 
     return f"jellysim {__version__} (jellysim export --format gltf)"
 

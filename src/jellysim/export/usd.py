@@ -55,7 +55,7 @@ def stage_settings(
     scene: Any, frames: range, fps: float, low: np.ndarray, high: np.ndarray, stage_file: str
 ) -> dict[str, Any]:
     """The settings written into the stage's metadata and the Blender script (plain values)."""
-    from jellysim import __version__
+    from jellysim._version import __version__
     from jellysim.render.frame import FLUID_COLOR
     from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 

@@ -240,7 +240,7 @@ class Simulation:
 
 def result_attributes(scene: Scene, scene_toml: str) -> dict[str, Any]:
     """The root attributes every result carries (DESIGN §3)."""
-    from jellysim import __version__
+    from jellysim._version import __version__
 
     return {
         "scene": scene_toml,
