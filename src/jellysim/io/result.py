@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -22,18 +21,9 @@ import h5py
 import numpy as np
 
 from jellysim.errors import InputError
+from jellysim.fields import Dataset
 
 RESULT_FILE = "result.h5"
-
-
-@dataclass(frozen=True)
-class Dataset:
-    """A per-frame dataset: its path, the shape of one frame, units and description."""
-
-    path: str
-    frame_shape: tuple[int, ...]
-    units: str
-    dtype: Any = np.float64
 
 
 def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[Dataset]:
