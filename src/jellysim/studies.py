@@ -15,10 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.config import load_scene
 from jellysim.config.load import parse_override
 from jellysim.errors import InputError
-from jellysim.simulation import Simulation
+from jellysim.simulation import Simulation, make_loop
 
 
 @dataclass(frozen=True)
@@ -57,19 +58,30 @@ def sweep(
     traces = []
     for value in values:
         loaded = load_scene(scene, {**base, key: value})
+        if loaded.tentacles.count == 0:
+            raise InputError(
+                f"{loaded.name} has no tentacles (tentacles.count = 0): a sweep traces a "
+                "tentacle's root and tip; set tentacles.count"
+            )
         if not 0 <= tentacle < loaded.tentacles.count:
             raise InputError(
                 f"--tentacle {tentacle}: the scene has tentacles 0..{loaded.tentacles.count - 1}"
             )
-        simulation = Simulation(loaded)
-        xs = [simulation.positions[tentacle, [0, -1], 0].copy()]
+        loop = make_loop(loaded)
+        xs = [_root_and_tip_x(loop, tentacle)]
         for _ in range(loaded.frame_count - 1):
-            simulation.step_frame()
-            xs.append(simulation.positions[tentacle, [0, -1], 0].copy())
+            loop.step_frame()
+            xs.append(_root_and_tip_x(loop, tentacle))
         x = np.array(xs)
         time = np.arange(loaded.frame_count) / loaded.fps
         traces.append(Trace(value, time, x[:, 0], x[:, 1]))
     return traces
+
+
+def _root_and_tip_x(loop: Simulation, tentacle: int) -> np.ndarray:
+    """x (m) of ``tentacle``'s root and tip in the loop's current frame, (2,)."""
+    positions = loop.frame_values()[fields.TENTACLE_POSITION.path]
+    return np.array(positions[tentacle, [0, -1], 0])
 
 
 def plot_sweep(traces: Sequence[Trace], key: str, path: Path, title: str = "") -> Path:

@@ -140,7 +140,7 @@ def test_scheme_keys_reach_the_solver() -> None:
     gradient and the either-density surface on the hexagonal lattice (and its surface
     threshold, 0.93) with collisions at 0.8 l0 and the surface repulsion; the paper's standard
     scheme on the square lattice is six keys away (and 0.97, 0.5 l0, no repulsion)."""
-    from jellysim.simulation.fluid import mps_parameters
+    from jellysim.fluid.setup import mps_parameters
 
     still = mps_parameters(jellysim.load_scene("hydrostatic-2d"))
     assert (still.source, still.gradient, still.lattice) == ("mixed", "corrected", "hexagonal")

@@ -10,8 +10,7 @@ import pytest
 import scenes
 
 import jellysim
-from jellysim.simulation import make_simulation
-from jellysim.simulation.soft import STILL_WATER_ACCELERATION_NUMBER
+from jellysim.coupling.bell_in_fluid import STILL_WATER_ACCELERATION_NUMBER
 
 
 @pytest.mark.parametrize(
@@ -24,16 +23,16 @@ def test_under_gravity_the_step_is_the_still_water_bound(
 ) -> None:
     """12 steps a 1/20 s frame at the preset's l0 = 0.16 m (a free fall over the water's 5.76 m
     would take 17) and the 18 a 1/10 s frame that the coarse gravity test was validated at."""
-    moon = make_simulation(jellysim.load_scene("moon-jelly", overrides))
-    dt = moon.solver.stable_dt()
+    moon = jellysim.Simulation(jellysim.load_scene("moon-jelly", overrides))
+    dt = moon.coupling.solver.stable_dt()
     assert dt == pytest.approx(STILL_WATER_ACCELERATION_NUMBER * math.sqrt(spacing / 9.81))
     assert math.ceil(moon.frame_dt / dt) == steps
-    assert not moon.solver.params.free_fall_floor
+    assert not moon.coupling.solver.params.free_fall_floor
 
 
 def test_in_weightless_water_the_particles_speed_sets_the_step() -> None:
-    moon = make_simulation(jellysim.load_scene("moon-jelly-weightless", scenes.SMALL_MOON))
-    solver = moon.solver
+    moon = jellysim.Simulation(jellysim.load_scene("moon-jelly-weightless", scenes.SMALL_MOON))
+    solver = moon.coupling.solver
     p = solver.params
     solver.velocity[0] = [0.0, 0.0, 0.5]  # the fastest water particle, m/s
     assert solver.stable_dt() == p.courant * p.l0 / 0.5

@@ -84,7 +84,7 @@ def test_api_watchdog_catches_a_bad_kernel_step(
     (A huge velocity set by an observer does not do: the implicit drag of the next step damps it
     physically, so the state is wrapped right after the compiled step instead.)
     """
-    real_advance_frame = jellysim.simulation.advance_frame
+    real_advance_frame = jellysim.simulation.tentacles.advance_frame
     calls = 0
 
     def advance_frame(positions: np.ndarray, velocities: np.ndarray, *args: object) -> None:
@@ -94,7 +94,7 @@ def test_api_watchdog_catches_a_bad_kernel_step(
         if calls == CLEAN + 1:
             velocities[BROKEN, 1:] = velocity
 
-    monkeypatch.setattr(jellysim.simulation, "advance_frame", advance_frame)
+    monkeypatch.setattr(jellysim.simulation.tentacles, "advance_frame", advance_frame)
     scene = _scene()
     with pytest.raises(jellysim.SimulationUnstable) as caught:
         jellysim.run(scene, tmp_path)
@@ -126,10 +126,10 @@ SCRIPT = textwrap.dedent(
 
     import numpy as np
 
-    import jellysim.simulation
+    import jellysim.simulation.tentacles
     from jellysim.cli.main import main
 
-    real_advance_frame = jellysim.simulation.advance_frame
+    real_advance_frame = jellysim.simulation.tentacles.advance_frame
     calls = 0
 
 
@@ -141,7 +141,7 @@ SCRIPT = textwrap.dedent(
             positions[{tentacle}, 3:] = np.nan
 
 
-    jellysim.simulation.advance_frame = advance_frame
+    jellysim.simulation.tentacles.advance_frame = advance_frame
     sys.exit(main(sys.argv[1:]))
     """
 )

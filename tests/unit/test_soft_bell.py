@@ -1,5 +1,5 @@
-"""The mass-spring bell (paper §4.2.1-4.2.4, docs/theory/bell.md Eq. B7-B12) without the fluid:
-shape, springs, muscle, records, roots and the skinned surface."""
+"""The mass-spring bell (paper §4.2.1-4.2.4, docs/theory/soft-bell.md Eq. B7-B12) without the fluid
+stepping: shape, springs, muscle (the body), the recorded margin and roots, the skinned surface."""
 
 from __future__ import annotations
 
@@ -10,13 +10,17 @@ import pytest
 import scenes
 
 import jellysim
+from jellysim.bell.skin import BellSkin
 from jellysim.bell.soft import CIRCUMFERENTIAL, SPRING_SAFETY, SoftBell
 from jellysim.bell.swimming import phase_lag
+from jellysim.coupling.bell_in_fluid import BellInFluid
+from jellysim.coupling.margin import RecordedMargin
 from jellysim.fluid.geometry import FLUID
-from jellysim.simulation.fluid import fluid_particles
+from jellysim.fluid.setup import fluid_particles
 
 # A bell 8 l0 wide and 5 l0 tall in a 22 x 22 x 15 l0 tank: resolved, yet small.
 SMALL = {**scenes.SMALL_MOON, "bell.radius": 2.0}
+L0 = float(scenes.SMALL_MOON["fluid.spacing"])  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="module")
@@ -25,8 +29,23 @@ def scene() -> jellysim.Scene:
 
 
 @pytest.fixture(scope="module")
-def bell(scene: jellysim.Scene) -> SoftBell:
-    return SoftBell(scene)
+def coupled(scene: jellysim.Scene) -> BellInFluid:
+    return BellInFluid(scene)
+
+
+@pytest.fixture(scope="module")
+def bell(coupled: BellInFluid) -> SoftBell:
+    return coupled.body
+
+
+@pytest.fixture(scope="module")
+def margin(coupled: BellInFluid) -> RecordedMargin:
+    return coupled.margin
+
+
+@pytest.fixture(scope="module")
+def skin(coupled: BellInFluid) -> BellSkin:
+    return coupled.skin
 
 
 def test_particles_are_lattice_cells_of_the_shell(scene: jellysim.Scene, bell: SoftBell) -> None:
@@ -34,14 +53,14 @@ def test_particles_are_lattice_cells_of_the_shell(scene: jellysim.Scene, bell: S
     cells = bell.rest / l0 - 0.5
     assert np.allclose(cells, np.round(cells), atol=1e-9)  # on the fluid's cell-centred lattice
     positions, kinds, _ = fluid_particles(scene)
-    carved = (kinds == FLUID) & bell.shell(positions)
+    carved = (kinds == FLUID) & bell.shape.shell(positions)
     np.testing.assert_array_equal(positions[carved], bell.rest)
     # Shell volume between the half-ellipsoids (2/3 pi (R^2 H - r^2 h)) over l0^3, within 15 %.
     b = scene.bell
     w = b.thickness * b.height
     volume = 2.0 / 3.0 * math.pi * (b.radius**2 * b.height - (b.radius - w) ** 2 * (b.height - w))
     assert len(bell.rest) == pytest.approx(volume / l0**3, rel=0.15)
-    relative = bell.rest - bell.centre
+    relative = bell.rest - bell.shape.centre
     assert relative[:, 2].min() == pytest.approx(0.5 * l0)  # the margin layer on the plane
 
 
@@ -58,10 +77,10 @@ def test_muscle_springs_run_around_the_margin_band(scene: jellysim.Scene, bell: 
     ends = bell.rest[s.pairs[s.muscle]]
     assert s.muscle.sum() > 0
     band = scene.bell.muscle_band * scene.bell.height
-    assert np.all(ends[..., 2] - bell.centre[2] < band)
+    assert np.all(ends[..., 2] - bell.shape.centre[2] < band)
     direction = ends[:, 1] - ends[:, 0]
     direction /= np.linalg.norm(direction, axis=1)[:, None]
-    mid = ends.mean(axis=1) - bell.centre
+    mid = ends.mean(axis=1) - bell.shape.centre
     theta = np.stack([-mid[:, 1], mid[:, 0], np.zeros(len(mid))], axis=1)
     theta /= np.linalg.norm(theta, axis=1)[:, None]
     assert np.all(np.abs(np.einsum("ij,ij->i", direction, theta)) >= CIRCUMFERENTIAL - 1e-12)
@@ -86,7 +105,7 @@ def _reference_forces(bell: SoftBell, positions: np.ndarray, time: float) -> np.
 @pytest.mark.parametrize("time", [0.0, 0.3, 0.6, 1.4])
 def test_spring_forces_match_hookes_law_and_sum_to_zero(bell: SoftBell, time: float) -> None:
     rng = np.random.default_rng(3)
-    positions = bell.rest + 0.1 * bell.l0 * rng.standard_normal(bell.rest.shape)
+    positions = bell.rest + 0.1 * L0 * rng.standard_normal(bell.rest.shape)
     forces = np.empty_like(positions)
     bell.spring_forces(positions, time, forces)
     expected = _reference_forces(bell, positions, time)
@@ -118,55 +137,54 @@ def test_muscle_cycle_is_periodic_continuous_and_full(bell: SoftBell) -> None:
 
 
 def test_roots_sit_on_the_margin_and_hang_down_at_rest(
-    scene: jellysim.Scene, bell: SoftBell
+    scene: jellysim.Scene, bell: SoftBell, margin: RecordedMargin
 ) -> None:
-    roots, velocities, directions = bell.roots(np.array([0.0]))
+    roots, velocities, directions = margin.roots(np.array([0.0]))
     assert roots.shape == (1, scene.tentacles.count, 3)
     np.testing.assert_allclose(velocities, 0.0)
     np.testing.assert_allclose(directions[0], np.tile([0.0, 0.0, -1.0], (len(roots[0]), 1)),
                                atol=1e-12)  # fmt: skip
-    relative = roots[0] - bell.centre
+    relative = roots[0] - bell.shape.centre
     angles = np.mod(np.arctan2(relative[:, 1], relative[:, 0]), 2 * np.pi)
     expected = 2 * np.pi * np.arange(scene.tentacles.count) / scene.tentacles.count
     # The Gaussian means of square-lattice cells sit within a hundredth of a radian of the angle.
     np.testing.assert_allclose(np.angle(np.exp(1j * (angles - expected))), 0.0, atol=0.01)
     rho = np.hypot(relative[:, 0], relative[:, 1])
     w = scene.bell.thickness * scene.bell.height
-    assert np.all((rho > scene.bell.radius - w - bell.l0) & (rho < scene.bell.radius))
-    np.testing.assert_array_equal(bell.margin(0.0)[:: bell.root_every], roots[0])
+    assert np.all((rho > scene.bell.radius - w - L0) & (rho < scene.bell.radius))
+    np.testing.assert_array_equal(margin.margin(0.0)[:: margin.root_every], roots[0])
 
 
 def test_roots_between_frames_are_c1_hermite(scene: jellysim.Scene) -> None:
-    bell = SoftBell(scene)
-    h = bell.frame_dt
+    coupled = BellInFluid(scene)
+    bell, margin = coupled.body, coupled.margin
+    h = margin.frame_dt
     rng = np.random.default_rng(7)
     moved = bell.rest + 0.05 * rng.standard_normal(bell.rest.shape)
     velocity = rng.standard_normal(bell.rest.shape)
-    bell.record(1, moved, velocity)
+    margin.record(1, moved, velocity)
     # At the frame times the records themselves.
-    p0, v0, _ = bell.roots(np.array([0.0]))
-    p1, v1, _ = bell.roots(np.array([h]))
-    record = bell.records[1]
+    p0, v0, _ = margin.roots(np.array([0.0]))
+    p1, v1, _ = margin.roots(np.array([h]))
+    record = margin.records[1]
     np.testing.assert_allclose(p1[0], record.roots, atol=1e-12)
     np.testing.assert_allclose(v1[0], record.velocities, atol=1e-12)
     np.testing.assert_allclose(v0[0], 0.0, atol=1e-12)
     # Velocity is the derivative of position (central differences inside the interval).
     t = np.array([0.4 * h - 1e-6, 0.4 * h, 0.4 * h + 1e-6])
-    p, v, _ = bell.roots(t)
+    p, v, _ = margin.roots(t)
     np.testing.assert_allclose((p[2] - p[0]) / 2e-6, v[1], rtol=1e-5, atol=1e-6)
 
 
-def test_skinned_surface_follows_rigid_motion(bell: SoftBell) -> None:
-    np.testing.assert_allclose(bell.surface(), bell.rest_surface)
+def test_skinned_surface_follows_rigid_motion(bell: SoftBell, skin: BellSkin) -> None:
+    np.testing.assert_allclose(skin.surface(bell.rest), skin.rest_surface)
     shift = np.array([0.3, -0.2, 0.5])
-    bell.position = bell.rest + shift
-    try:
-        np.testing.assert_allclose(bell.surface(), bell.rest_surface + shift, atol=1e-12)
-    finally:
-        bell.position = bell.rest.copy()
-    outer = bell.rest_surface[1 : 1 + bell.sectors * 12]
-    relative = outer - bell.centre
-    b = bell
+    np.testing.assert_allclose(
+        skin.surface(bell.rest + shift), skin.rest_surface + shift, atol=1e-12
+    )
+    outer = skin.rest_surface[1 : 1 + skin.sectors * 12]
+    relative = outer - bell.shape.centre
+    b = bell.shape
     on_ellipsoid = (np.hypot(relative[:, 0], relative[:, 1]) / b.radius) ** 2 + (
         relative[:, 2] / b.height
     ) ** 2
@@ -213,7 +231,7 @@ def _stretched(bell: SoftBell, factor: float = 1.01) -> np.ndarray:
     small jitter that leaves them stretched."""
     rng = np.random.default_rng(5)
     centre = bell.rest.mean(axis=0)
-    jitter = 1e-3 * bell.l0 * rng.standard_normal(bell.rest.shape)
+    jitter = 1e-3 * L0 * rng.standard_normal(bell.rest.shape)
     return centre + factor * (bell.rest - centre) + jitter
 
 
@@ -233,7 +251,7 @@ def test_implicit_springs_solve_the_backward_euler_system(bell: SoftBell) -> Non
     explicit = np.empty_like(positions)
     bell.spring_forces(positions, time + dt, explicit)
     jacobian = np.empty((n, n))
-    h = 1e-6 * bell.l0
+    h = 1e-6 * L0
     plus, minus = np.empty_like(positions), np.empty_like(positions)
     for c in range(n):
         shifted = positions.copy().reshape(-1)
@@ -278,13 +296,13 @@ def test_implicit_springs_stay_bounded_far_past_the_explicit_limit(
         velocities += dt * force / bell.mass
         positions += dt * velocities
         largest = max(largest, float(np.abs(positions - bell.rest).max()))
-        if not np.isfinite(largest) or largest > 100 * bell.radius:
+        if not np.isfinite(largest) or largest > 100 * bell.shape.radius:
             break
     if implicit:
-        assert largest < bell.radius
+        assert largest < bell.shape.radius
         assert np.abs(velocities).max() < 0.5  # m/s: damped, not ringing up
     else:
-        assert largest > 100 * bell.radius or not np.isfinite(largest)
+        assert largest > 100 * bell.shape.radius or not np.isfinite(largest)
 
 
 def test_phase_lag_recovers_a_known_lag() -> None:

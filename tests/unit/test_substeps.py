@@ -3,12 +3,14 @@
 import pytest
 
 import jellysim
+from jellysim.bell import make_root_driver
 from jellysim.errors import InputError
 from jellysim.tentacle.model import plan_substeps
 
 
 def plan(**overrides):
-    return plan_substeps(jellysim.load_scene("brown-jelly", overrides))
+    scene = jellysim.load_scene("brown-jelly", overrides)
+    return plan_substeps(scene, make_root_driver(scene).forcing())
 
 
 def test_substeps_fill_the_frame_exactly():

@@ -1,53 +1,27 @@
-"""Bell models: what drives the tentacle roots (paper §4.2), chosen by name.
+"""Bell models chosen by name: the bells that drive the tentacle roots by a law of their own.
 
-A bell model is a :class:`RootDriver`: it places the tentacle roots on the margin and gives,
-at any time, their positions, C1-continuous velocities and clamp directions, the bell's own
-velocity and axis (the flow is relative to the bell), and the margin polyline. A bell with a body
-adds its own datasets to the result (its surface mesh, say) through ``frame_datasets``,
-``frame_values`` and ``static_datasets``.
+``bell.model = "none"`` (:mod:`.forced`, the paper's forced base point) and ``"kinematic"``
+(:mod:`.kinematic`, the animated Brown Jelly bell) are :class:`BellModel` s: root drivers
+(:class:`jellysim.tentacle.roots.RootDriver`) that also add their body's datasets to the result.
+The mass-spring bell (:mod:`.soft`, :mod:`.skin`) is a body simulated in the water; what drives
+its tentacles is the margin recorded from that simulation (:mod:`jellysim.coupling.margin`), so it
+is not in this registry.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from jellysim.config.schema import Scene
-from jellysim.io.result import Dataset
+from jellysim.fields import Dataset
+from jellysim.tentacle.roots import RootDriver
 
 
-class Forcing(NamedTuple):
-    """How hard a bell drives the roots, for the choice of the substep."""
-
-    speed: float  # m/s: the largest root speed relative to the bell's mean motion
-    acceleration: float  # m/s2: the largest root acceleration
-    period: float  # s: the period of an equivalent sine forcing (0: no forcing)
-
-
-class RootDriver(Protocol):
-    """Prescribes the tentacle roots. Times are (S,) arrays in s."""
-
-    def roots(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Root positions (m), velocities (m/s) and unit clamp directions, each (S, T, 3)."""
-        ...
-
-    def bell_velocity(self, times: np.ndarray) -> np.ndarray:
-        """Velocity (m/s) of the bell's frame, (S, 3)."""
-        ...
-
-    def axis(self, times: np.ndarray) -> np.ndarray:
-        """Unit bell axis (the swimming direction, +z at rest), (S, 3)."""
-        ...
-
-    def margin(self, time: float) -> np.ndarray:
-        """The margin as a closed polyline, (R, 3) m; the roots lie on it."""
-        ...
-
-    def forcing(self) -> Forcing:
-        """The scales of the root motion."""
-        ...
+class BellModel(RootDriver, Protocol):
+    """A root driver with a body: per-frame and static datasets for the result."""
 
     def frame_datasets(self) -> list[Dataset]:
         """Per-frame datasets of the bell's body beyond the margin and the roots."""
@@ -66,18 +40,24 @@ class RootDriver(Protocol):
         return {}
 
 
-BELL_MODELS: dict[str, Callable[[Scene], RootDriver]] = {}
+BELL_MODELS: dict[str, Callable[[Scene], BellModel]] = {}
 
 
-def register(name: str) -> Callable[[Callable[[Scene], RootDriver]], Callable[[Scene], RootDriver]]:
-    def decorate(factory: Callable[[Scene], RootDriver]) -> Callable[[Scene], RootDriver]:
+def register(name: str) -> Callable[[Callable[[Scene], BellModel]], Callable[[Scene], BellModel]]:
+    def decorate(factory: Callable[[Scene], BellModel]) -> Callable[[Scene], BellModel]:
         BELL_MODELS[name] = factory
         return factory
 
     return decorate
 
 
-def make_root_driver(scene: Scene) -> RootDriver:
+def make_root_driver(scene: Scene) -> BellModel:
+    """The bell model of ``scene`` (``bell.model`` "none" or "kinematic")."""
+    if scene.bell.model not in BELL_MODELS:
+        raise ValueError(
+            f"bell.model = {scene.bell.model!r} drives its roots from the simulated bell: "
+            "build jellysim.Simulation(scene)"
+        )
     return BELL_MODELS[scene.bell.model](scene)
 
 

@@ -9,15 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from jellysim.bell import Forcing, RootDriver, register
+from jellysim.bell import BellModel, register
 from jellysim.config.schema import Scene
+from jellysim.tentacle.roots import NO_FORCING, Forcing
 
 MARGIN_POINTS_PER_ROOT = 8
 Z_AXIS = np.array([0.0, 0.0, 1.0])
 
 
-class ForcedRoots(RootDriver):
-    """Roots on a still margin, oscillated forcibly (:class:`jellysim.bell.RootDriver`)."""
+class ForcedRoots(BellModel):
+    """Roots on a still margin, oscillated forcibly (:class:`jellysim.bell.BellModel`)."""
 
     def __init__(
         self,
@@ -51,7 +52,7 @@ class ForcedRoots(RootDriver):
 
     def forcing(self) -> Forcing:
         if self.amplitude == 0.0 or self.omega == 0.0:
-            return Forcing(0.0, 0.0, 0.0)
+            return NO_FORCING
         return Forcing(
             self.amplitude * self.omega, self.amplitude * self.omega**2, 2.0 * np.pi / self.omega
         )

@@ -27,9 +27,11 @@ import math
 
 import numpy as np
 
-from jellysim.bell import Forcing, RootDriver, register
+from jellysim import fields
+from jellysim.bell import BellModel, register
 from jellysim.config.schema import Scene
-from jellysim.io.result import Dataset
+from jellysim.fields import Dataset
+from jellysim.tentacle.roots import NO_FORCING, Forcing
 
 MESH_RINGS = 12  # meridian rings of each surface, apex excluded
 MIN_SECTORS = 48  # vertices around the margin, at least
@@ -114,8 +116,8 @@ def waveform_peaks(waveform: str, jet_fraction: float) -> tuple[float, float, fl
     return SMOOTHSTEP_PEAK_SLOPE / shortest, SMOOTHSTEP_PEAK_CURVATURE / shortest**2, 2.0 * shortest
 
 
-class KinematicBell(RootDriver):
-    """A rigid, pulsing, swimming bell (:class:`jellysim.bell.RootDriver`); times in s."""
+class KinematicBell(BellModel):
+    """A rigid, pulsing, swimming bell (:class:`jellysim.bell.BellModel`); times in s."""
 
     def __init__(
         self,
@@ -228,7 +230,7 @@ class KinematicBell(RootDriver):
     def forcing(self) -> Forcing:
         """Radial margin motion plus the swing of the swimming speed about its mean."""
         if self.contraction == 0.0:
-            return Forcing(0.0, 0.0, 0.0)
+            return NO_FORCING
         slope, curvature, period = waveform_peaks(self.waveform, self.jet_fraction)
         margin = self.radius * self.contraction
         swing = self.swim_speed * self.speed_gain
@@ -293,24 +295,24 @@ class KinematicBell(RootDriver):
     def frame_datasets(self) -> list[Dataset]:
         vertices = 2 + (2 * MESH_RINGS - 1) * self.sectors
         return [
-            Dataset("bell/surface_vertices", (vertices, 3), "m", np.float32),
-            Dataset("bell/centre", (3,), "m"),
-            Dataset("bell/contraction", (), "1"),
+            fields.BELL_SURFACE_VERTICES.dataset(V=vertices),
+            fields.BELL_CENTRE.dataset(),
+            fields.BELL_CONTRACTION.dataset(),
         ]
 
     def frame_values(self, time: float) -> dict[str, np.ndarray]:
         q, _, z0, _ = (float(value[0]) for value in self.motion(np.array([time])))
         return {
-            "bell/surface_vertices": self.surface(time).astype(np.float32),
-            "bell/centre": np.array([0.0, 0.0, z0]),
-            "bell/contraction": np.array(q),
+            fields.BELL_SURFACE_VERTICES.path: self.surface(time).astype(np.float32),
+            fields.BELL_CENTRE.path: np.array([0.0, 0.0, z0]),
+            fields.BELL_CONTRACTION.path: np.array(q),
         }
 
     def static_datasets(self) -> dict[str, tuple[np.ndarray, str]]:
-        return {"bell/surface_faces": (self.faces, "1")}
+        return {fields.BELL_SURFACE_FACES.path: (self.faces, fields.BELL_SURFACE_FACES.units)}
 
     def links(self) -> dict[str, str]:
-        return {"bell/position": "bell/surface_vertices"}
+        return {fields.BELL_POSITION.path: fields.BELL_SURFACE_VERTICES.path}
 
 
 @register("kinematic")

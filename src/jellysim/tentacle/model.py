@@ -7,10 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jellysim.bell import make_root_driver
 from jellysim.config.schema import Scene
 from jellysim.errors import InputError
 from jellysim.tentacle.kernels import ChainModel, Medium, drag_gain
+from jellysim.tentacle.roots import Forcing
 
 # Cube of the span L of the paper's three-point bending cell, in units of d^3 (Eq. T2).
 # "euler-bernoulli": L^3 = 12 d^3 makes the chain's continuum stiffness exactly EI;
@@ -129,19 +129,21 @@ class SubstepPlan:
         return f"dt = {self.dt:.3g} s, {self.substeps} substeps per frame (limited by {binding})"
 
 
-def characteristic_speed(scene: Scene) -> float:
-    """A speed scale (m/s) of the tentacles relative to the water."""
-    return abs(scene.flow.speed) + 3.0 * scene.flow.noise + make_root_driver(scene).forcing().speed
+def characteristic_speed(scene: Scene, forcing: Forcing) -> float:
+    """A speed scale (m/s) of the tentacles relative to the water, their roots driven with
+    ``forcing``."""
+    return abs(scene.flow.speed) + 3.0 * scene.flow.noise + forcing.speed
 
 
-def plan_substeps(scene: Scene) -> SubstepPlan:
+def plan_substeps(scene: Scene, forcing: Forcing) -> SubstepPlan:
     """Choose the substep from the model's time scales; the user never sets dt.
 
     Bending and drag are integrated implicitly (unconditionally stable), so the limits are for
     accuracy: a tenth of the period over 2 pi of the chain's first cantilever mode
     ``omega_1 = (1.875 / L)^2 sqrt(EI_eff / (rho_t A))``; half the drag relaxation time
     ``m / k(U)`` at the characteristic relative speed U; a hundredth of the root-motion period (of
-    the equivalent sine for a bell's pulse, :meth:`jellysim.bell.RootDriver.forcing`);
+    the equivalent sine for a bell's pulse: ``forcing``, the root driver's
+    :meth:`jellysim.tentacle.roots.RootDriver.forcing`);
     a twentieth of the noise correlation time; the frame interval; and a Courant number of 2
     for the tension waves along the chain, ``dt <= 2 d / c`` with ``c = sqrt(T / (rho_t A))`` and
     T the tension that drag, buoyant weight and the root's acceleration can build up over the
@@ -159,10 +161,12 @@ def plan_substeps(scene: Scene) -> SubstepPlan:
     )
     mass = scene.tentacle_density * area * d
     gain = drag_gain(
-        max(characteristic_speed(scene), 1e-12), d, scene.water.density, scene.water.viscosity
+        max(characteristic_speed(scene, forcing), 1e-12),
+        d,
+        scene.water.density,
+        scene.water.viscosity,
     )
-    forcing = make_root_driver(scene).forcing()
-    speed = characteristic_speed(scene)
+    speed = characteristic_speed(scene, forcing)
     volume = area * d
     gravity = math.sqrt(sum(g * g for g in scene.water.gravity))
     per_particle = (

@@ -1,0 +1,183 @@
+"""The soft bell's margin, recorded each frame, driving the tentacle roots (paper §4.2.4,
+docs/theory/soft-bell.md §5, Eq. B10-B11).
+
+Tentacle base points and the margin polyline are Gaussian-weighted means (over the arc, width
+``MARGIN_SMOOTHING x l0``) of the lowest particle layer, recorded each frame with their velocities
+and driven between frames by cubic Hermite interpolation (C1 in time). The clamp direction, -z at
+rest, turns with the wall: with the mean of the third layer up, the meridian angle of (root -
+upper point) is tracked. :class:`RecordedMargin` is the tentacles' root driver
+(:class:`jellysim.tentacle.roots.RootDriver`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy import sparse
+
+from jellysim.bell.soft import BellShape
+from jellysim.tentacle.roots import Forcing
+
+MARGIN_SMOOTHING = 1.5  # l0: standard deviation of the Gaussian along the margin arc
+
+
+class Record(NamedTuple):
+    """What the bell drove the tentacles with at one frame: roots (T, 3) m and velocities m/s,
+    clamp directions (T, 3), the margin polyline (R, 3) m, the bell's mean velocity (3,) m/s."""
+
+    roots: np.ndarray
+    velocities: np.ndarray
+    directions: np.ndarray
+    margin: np.ndarray
+    bell_velocity: np.ndarray
+
+
+class RecordedMargin:
+    """The margin of a bell of ``shape`` whose particles rest at ``rest`` (B, 3) m on a lattice of
+    spacing ``l0`` (m), sampled at ``sectors`` angles; every ``sectors // tentacles``-th sample
+    is a tentacle root. Frames are ``frame_dt`` (s) apart; ``forcing`` is the bell's (the scales
+    of its pulse, for the tentacles' substep)."""
+
+    def __init__(
+        self,
+        shape: BellShape,
+        rest: np.ndarray,
+        l0: float,
+        sectors: int,
+        tentacles: int,
+        frame_dt: float,
+        forcing: Forcing,
+    ) -> None:
+        self.sectors = sectors
+        self.sample_angles = 2.0 * np.pi * np.arange(sectors) / sectors
+        self.tentacles = tentacles
+        self.root_every = sectors // tentacles if tentacles else 0
+        self.frame_dt = frame_dt
+        self._forcing = forcing
+        rho, height, angle = shape.cylindrical(rest)
+        sigma = MARGIN_SMOOTHING * l0
+        self._margin_weights = self._ring_weights(rho, angle, height < l0, sigma)
+        self._upper_weights = self._ring_weights(
+            rho, angle, (height >= 2 * l0) & (height < 3 * l0), sigma
+        )
+        self.rest_margin = self._margin_weights @ rest
+        self._rest_meridian = self._meridian_angles(rest)
+        self.records: dict[int, Record] = {}
+        self.record(0, rest, np.zeros_like(rest))
+
+    def _ring_weights(
+        self, rho: np.ndarray, angle: np.ndarray, layer: np.ndarray, sigma: float
+    ) -> sparse.csr_matrix:
+        """(R, B) weights, rows summing to 1: per sample angle, a Gaussian of width ``sigma`` (m)
+        over the arc length to the particles of ``layer`` (Eq. B10)."""
+        gap = np.angle(np.exp(1j * (angle[None, :] - self.sample_angles[:, None])))
+        weights = np.exp(-0.5 * (gap * rho[None, :] / sigma) ** 2) * layer[None, :]
+        weights[np.abs(gap * rho[None, :]) > 3.0 * sigma] = 0.0
+        total = weights.sum(axis=1)
+        if np.any(total <= 0.0):
+            raise ValueError("the bell's margin layer has a gap: refine fluid.spacing")
+        return sparse.csr_matrix(weights / total[:, None])
+
+    def _meridian_angles(self, positions: np.ndarray) -> np.ndarray:
+        """Per sample: the angle of (margin point - upper point) in its meridian plane (R,)."""
+        margin = self._margin_weights @ positions
+        upper = self._upper_weights @ positions
+        axis_point = margin.mean(axis=0)
+        radial = margin - axis_point
+        radial[:, 2] = 0.0
+        radial /= np.linalg.norm(radial, axis=1)[:, None]
+        d = margin - upper
+        return np.arctan2(np.einsum("ij,ij->i", d, radial), -d[:, 2])
+
+    def record(self, frame: int, positions: np.ndarray, velocities: np.ndarray) -> None:
+        """Record what the bell particles at ``positions`` (B, 3) m moving at ``velocities``
+        drive at ``frame``: roots, clamp directions, margin polyline, mean velocity (Eq. B10).
+        Only the last two frames are kept."""
+        margin = self._margin_weights @ positions
+        margin_velocity = self._margin_weights @ velocities
+        turn = self._meridian_angles(positions) - self._rest_meridian
+        radial = margin - margin.mean(axis=0)
+        radial[:, 2] = 0.0
+        radial /= np.linalg.norm(radial, axis=1)[:, None]
+        directions = np.sin(turn)[:, None] * radial
+        directions[:, 2] -= np.cos(turn)
+        take = slice(0, None, self.root_every) if self.tentacles else slice(0, 0)
+        self.records[frame] = Record(
+            margin[take],
+            margin_velocity[take],
+            directions[take],
+            margin,
+            velocities.mean(axis=0),
+        )
+        for old in [k for k in self.records if k < frame - 1]:
+            del self.records[old]
+
+    def restart(self, frame: int, positions: np.ndarray, velocities: np.ndarray) -> None:
+        """Forget every record and record ``frame`` afresh (a resume from a checkpoint)."""
+        self.records.clear()
+        self.record(frame, positions, velocities)
+
+    def _bracket(self, time: float) -> tuple[Record, Record, float]:
+        frame = int(math.floor(time / self.frame_dt + 1e-9))
+        if time - frame * self.frame_dt < 1e-9 * self.frame_dt and frame in self.records:
+            frame -= 1  # a frame time belongs to the interval that ends there
+        first = self.records.get(frame, self.records[max(self.records)])
+        second = self.records.get(frame + 1, first)
+        s = (time - frame * self.frame_dt) / self.frame_dt
+        return first, second, float(np.clip(s, 0.0, 1.0))
+
+    # RootDriver (Eq. B11).
+
+    def roots(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Cubic Hermite between the recorded frames (Eq. B11)."""
+        h = self.frame_dt
+        shape = (len(times), self.tentacles, 3)
+        positions, velocities, directions = np.empty(shape), np.empty(shape), np.empty(shape)
+        for n, t in enumerate(np.asarray(times, dtype=np.float64)):
+            a, b, s = self._bracket(float(t))
+            w, dw = _hermite(s)
+            positions[n] = w[0] * a.roots + w[1] * h * a.velocities
+            positions[n] += w[2] * b.roots + w[3] * h * b.velocities
+            velocities[n] = dw[0] * a.roots + dw[1] * h * a.velocities
+            velocities[n] += dw[2] * b.roots + dw[3] * h * b.velocities
+            velocities[n] /= h
+            d = (1.0 - s) * a.directions + s * b.directions
+            directions[n] = d / np.linalg.norm(d, axis=1)[:, None]
+        return positions, velocities, directions
+
+    def bell_velocity(self, times: np.ndarray) -> np.ndarray:
+        out = np.empty((len(times), 3))
+        for n, t in enumerate(np.asarray(times, dtype=np.float64)):
+            a, b, s = self._bracket(float(t))
+            out[n] = (1.0 - s) * a.bell_velocity + s * b.bell_velocity
+        return out
+
+    def axis(self, times: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(np.array([0.0, 0.0, 1.0]), (np.size(times), 3)).copy()
+
+    def margin(self, time: float) -> np.ndarray:
+        a, b, s = self._bracket(time)
+        return (1.0 - s) * a.margin + s * b.margin
+
+    def forcing(self) -> Forcing:
+        return self._forcing
+
+    def contraction(self) -> float:
+        """1 - (mean margin radius at the last record) / (at rest), from the margin polyline."""
+        margin = self.records[max(self.records)].margin
+        return 1.0 - _ring_radius(margin) / _ring_radius(self.rest_margin)
+
+
+def _hermite(s: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Cubic Hermite basis (h00, h10, h01, h11) at s in [0, 1] and its derivatives in s."""
+    return (
+        (2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, 3 * s**2 - 2 * s**3, s**3 - s**2),
+        (6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, 6 * s - 6 * s**2, 3 * s**2 - 2 * s),
+    )
+
+
+def _ring_radius(ring: np.ndarray) -> float:
+    relative = ring - ring.mean(axis=0)
+    return float(np.hypot(relative[:, 0], relative[:, 1]).mean())

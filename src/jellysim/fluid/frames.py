@@ -1,0 +1,76 @@
+"""The fluid from one frame time to the next, in equal MPS steps of at most the stable dt."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from jellysim.errors import SimulationUnstable
+from jellysim.fluid.mps import FluidDiverged, MPSSolver, substep
+
+# Called before each step with (time, dt) in s: the external force density (N, D) N/m3, or None.
+ExternalForce = Callable[[float, float], "np.ndarray | None"]
+
+
+@dataclass
+class FrameStats:
+    """What the steps of the last frame did: the last step's pressure-solver ``iterations`` and
+    relative ``residual``, the number of ``steps``; ``seconds`` per phase over the whole run."""
+
+    iterations: int = 0
+    residual: float = 0.0
+    steps: int = 0
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def as_array(self) -> np.ndarray:
+        """(iterations, residual, steps) for a checkpoint."""
+        return np.array([self.iterations, self.residual, self.steps])
+
+    def restore(self, values: np.ndarray) -> None:
+        self.iterations, self.residual = int(values[0]), float(values[1])
+        self.steps = int(values[2])
+
+
+def advance_to(
+    solver: MPSSolver,
+    end: float,
+    frame_dt: float,
+    stats: FrameStats,
+    dt_limit: float = math.inf,
+    external_force: ExternalForce | None = None,
+) -> None:
+    """Step ``solver`` to the time ``end`` (s) in equal steps of at most its stable dt and
+    ``dt_limit`` (s) (:func:`jellysim.fluid.mps.substep`), landing on ``end`` exactly; the frame's
+    figures go into ``stats``. A diverged pressure solve raises SimulationUnstable."""
+    iterations, residual, steps = 0, 0.0, 0
+    while solver.time < end - 1e-12 * frame_dt:
+        dt = substep(end - solver.time, min(solver.stable_dt(), dt_limit))
+        force = external_force(solver.time, dt) if external_force is not None else None
+        try:
+            step = solver.step(dt, force)
+        except FluidDiverged as err:
+            raise SimulationUnstable(
+                f"the fluid diverged at t = {err.time:.6g} s: the pressure solve reached "
+                f"{err.iterations} iterations with relative residual {err.residual:.3g}; "
+                "lower fluid.courant or refine fluid.spacing",
+                time=err.time,
+            ) from None
+        iterations, residual, steps = step.iterations, step.residual, steps + 1
+        for phase, seconds in step.seconds.items():
+            stats.seconds[phase] = stats.seconds.get(phase, 0.0) + seconds
+    solver.time = end  # the frame time exactly (steps land on it up to rounding)
+    stats.iterations, stats.residual, stats.steps = iterations, residual, steps
+
+
+def compile_on_copy(solver: MPSSolver, external_force: np.ndarray | None = None) -> None:
+    """Compile the solver's kernels (or load them from Numba's cache) by one tiny step of a
+    throw-away copy, so that the first frame's timing is honest."""
+    probe = MPSSolver(solver.params, solver.position.copy(), solver.kind)
+    probe.restore(solver.state_arrays())
+    try:
+        probe.step(min(probe.stable_dt(), 1e-6), external_force)
+    except FluidDiverged:
+        pass  # the first real step reports it, with its time; it compiles what is left

@@ -1,0 +1,127 @@
+"""A scene run to ``result.h5``: the result store, checkpoints, resume and progress around any
+frame loop (:class:`jellysim.simulation.loop.FrameLoop`)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jellysim.config import Scene, load_scene, scene_to_toml
+from jellysim.errors import InputError
+from jellysim.io.checkpoint import (
+    CHECKPOINT_FILE,
+    load_checkpoint,
+    remove_checkpoint,
+    save_checkpoint,
+    scene_mismatch,
+)
+from jellysim.io.folders import output_folder
+from jellysim.io.result import RESULT_FILE, Result, read_frames
+from jellysim.progress import progress
+from jellysim.simulation.loop import FrameLoop, Observer, make_loop
+
+log = logging.getLogger(__name__)
+
+SCENE_FILE = "scene.toml"
+
+
+def default_out(scene: Scene) -> Path:
+    return Path("out") / scene.name
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(text, encoding="utf-8")
+    os.replace(temporary, path)
+
+
+def _check_state(folder: Path, loop: FrameLoop, state: dict[str, np.ndarray]) -> None:
+    """A checkpoint must hold every array of the loop's state, each of its shape."""
+    for name, array in loop.checkpoint_state().items():
+        saved = state.get(name)
+        if saved is None or saved.shape != array.shape:
+            raise InputError(
+                f"cannot resume '{folder}': {CHECKPOINT_FILE} does not hold this scene's state "
+                f"('{name}' {'is missing' if saved is None else f'has shape {saved.shape}'}); "
+                "run with --force to start again"
+            )
+
+
+def run(
+    scene: Scene | str | os.PathLike[str] | Mapping[str, Any],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    overrides: Mapping[str, Any] | None = None,
+    force: bool = False,
+    resume: bool = False,
+    quiet: bool = True,
+    observers: list[Observer] | None = None,
+) -> Result:
+    """Run a scene to ``out/result.h5`` (default ``out/<name>``) and return the open result.
+
+    ``force`` replaces an existing result; ``resume`` continues it from its last checkpoint.
+    ``quiet=False`` shows a progress bar with ETA on runs longer than two seconds.
+    """
+    if not isinstance(scene, Scene) or overrides:
+        scene = load_scene(scene if not isinstance(scene, os.PathLike) else str(scene), overrides)
+    folder = Path(out) if out is not None else default_out(scene)
+    result_path = folder / RESULT_FILE
+    scene_toml = scene_to_toml(scene)
+    if force and resume:
+        raise InputError("--force and --resume exclude each other")
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--out {folder}: exists and is not a folder")
+    if result_path.exists() and not (force or resume):
+        raise InputError(f"{result_path} exists; --force replaces it, --resume continues it")
+    if resume and not result_path.exists():
+        raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
+
+    loop = make_loop(scene)
+    loop.observers.extend(observers or [])
+    if resume:
+        with Result(folder) as existing:
+            same_scene = existing.scene_text == scene_toml
+            complete = existing.complete
+        if not same_scene:
+            raise scene_mismatch(folder)
+        if complete:
+            log.info("%s is complete; nothing to resume", result_path)
+            return Result(folder)
+        frame, state = load_checkpoint(folder, scene_toml)
+        _check_state(folder, loop, state)
+        loop.restore(frame, state)
+        kept = read_frames(result_path, loop.datasets(), frame + 1)
+        writer = loop.writer(result_path, scene_toml, kept)
+    else:
+        output_folder(folder)
+        remove_checkpoint(folder)
+        _write_text_atomic(folder / SCENE_FILE, scene_toml)
+        writer = loop.writer(result_path, scene_toml)
+        writer.append(loop.frame_values())
+
+    log.info("%s: %s, %d frames -> %s", scene.name, loop.describe(), scene.frame_count, result_path)
+    every = scene.solver.checkpoint_every
+    try:
+        start = time.perf_counter()
+        loop.prepare()
+        log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
+        total, done = scene.frame_count - 1, loop.frame
+        with progress(total, done, quiet, "simulating", delay=2.0) as bar:
+            while loop.frame < scene.frame_count - 1:
+                loop.step_frame()
+                writer.append(loop.frame_values())
+                if loop.frame % every == 0:
+                    writer.flush()  # the checkpoint's frame must be on disk first
+                    save_checkpoint(folder, loop.frame, scene_toml, loop.checkpoint_state())
+                bar.update(1)
+    finally:
+        writer.close()
+    loop.finish()
+    remove_checkpoint(folder)
+    return Result(folder)
