@@ -33,7 +33,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 from numba import njit, prange
 
-from jellysim.fluid.kernels import FAST, Matrix, dot, multiply
+from jellysim.fluid.linalg import FAST, Matrix, dot, multiply
 
 
 def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[np.ndarray, int]:
@@ -257,7 +257,7 @@ def deflated_cg(
     """CG preconditioned by :class:`Deflation` for ``A x = b``, from the guess in ``x``
     (overwritten by the solution); rows at ``position`` ((n, D) m), aggregates ``size`` (m)
     wide on a lattice from ``origin``. Stops when ``|b - A x| <= tolerance |b|``, like
-    :func:`jellysim.fluid.kernels.conjugate_gradient`. Returns (iterations, relative
+    :func:`jellysim.fluid.linalg.conjugate_gradient`. Returns (iterations, relative
     residual)."""
     n = b.shape[0]
     norm_b = math.sqrt(dot(b, b))
