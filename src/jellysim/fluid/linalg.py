@@ -1,4 +1,6 @@
-"""Sparse linear algebra of the pressure solve: CSR products, IC(0) and conjugate gradients.
+"""Sparse linear algebra of the pressure solve: CSR products, IC(0), and the one preconditioned
+conjugate gradient of the package (:func:`preconditioned_cg`, also the soft bell's implicit springs
+and the deflated solver).
 
 Reductions are serial and parallel loops are gathers (each writes its own row), so results are
 bitwise identical whatever the number of threads.
@@ -7,16 +9,68 @@ bitwise identical whatever the number of threads.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Protocol, TypeVar
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.extending import overload_method, register_jitable
 
 # fastmath limited to reassociation and contraction: no-NaN/no-inf assumptions would hide the
 # divergence that the solver must report.
 FAST = {"reassoc", "contract"}
 
 
+class LinearOperator(Protocol):
+    """A symmetric positive definite A: ``apply(x, out)`` writes ``out = A x`` ((n,) float64)."""
+
+    def apply(self, x: np.ndarray, out: np.ndarray) -> None: ...
+
+
+class Preconditioner(Protocol):
+    """``precondition(r, z)`` writes ``z = M^-1 r`` ((n,) float64), M symmetric positive
+    definite."""
+
+    def precondition(self, r: np.ndarray, z: np.ndarray) -> None: ...
+
+
+# The NamedTuple classes whose apply / precondition compiled code may call (one overload per
+# method name, which looks the class up here: two overloads of one method name on NamedTuples
+# collide in Numba's lowering). Numba requires the overloads' parameters, annotations included,
+# to be the methods' own.
+_OPERATORS: set[type] = set()
+_PRECONDITIONERS: set[type] = set()
+Kind = TypeVar("Kind", bound=type)
+
+
+def linear_operator(cls: Kind) -> Kind:
+    """Class decorator: the NamedTuple ``cls``'s ``apply`` (whose body calls compiled kernels)
+    becomes callable from compiled code too, resolved when the caller is compiled, so callers
+    stay cacheable (a jitted function passed as an argument would not be)."""
+    _OPERATORS.add(cls)
+    return cls
+
+
+def preconditioner(cls: Kind) -> Kind:
+    """Class decorator: as :func:`linear_operator`, for the method ``precondition``."""
+    _PRECONDITIONERS.add(cls)
+    return cls
+
+
+@overload_method(types.BaseNamedTuple, "apply")
+def _compiled_apply(self, x: np.ndarray, out: np.ndarray):
+    if self.instance_class in _OPERATORS:
+        return self.instance_class.apply
+    return None
+
+
+@overload_method(types.BaseNamedTuple, "precondition")
+def _compiled_precondition(self, r: np.ndarray, z: np.ndarray):
+    if self.instance_class in _PRECONDITIONERS:
+        return self.instance_class.precondition
+    return None
+
+
+@linear_operator
 class Matrix(NamedTuple):
     """Square sparse matrix in CSR with sorted column indices (or, assembled for the deflated
     solver, unsorted: the diagonal first); ``diagonal[i]`` is the position of entry (i, i) in
@@ -31,12 +85,18 @@ class Matrix(NamedTuple):
     diagonal: np.ndarray  # (n,) int64
     blocks: np.ndarray  # (2,) int64
 
+    def apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        """``out = A x``."""
+        multiply(self, x, out)
 
+
+@preconditioner
 class Factor(NamedTuple):
     """The IC(0) factor L as the triangular solves read it: the strict lower triangle of L by
     rows, that of L^T (the strict upper triangle) by rows from the last to the first, so that
     both substitutions stream through memory forwards and gather (no scatter), with 32-bit
-    column indices (the solves are bound by memory bandwidth), and 1 / L_ii.
+    column indices (the solves are bound by memory bandwidth), and 1 / L_ii; ``blocks`` those
+    of the :class:`Matrix` factored.
 
     Entries stay in double precision: with a single-precision copy the solves still converge
     to the same residual, but the coarse dam break of tests/integration/test_fluid_run.py
@@ -49,6 +109,23 @@ class Factor(NamedTuple):
     upper_indices: np.ndarray  # (nnz_lower,) int32
     upper_data: np.ndarray  # (nnz_lower,) float64
     inverse_diagonal: np.ndarray  # (n,) float64
+    blocks: np.ndarray  # (2,) int64
+
+    def precondition(self, r: np.ndarray, z: np.ndarray) -> None:
+        """``z = (L L^T)^-1 r``, Eq. (F11)."""
+        _precondition(self, r, z)
+
+
+@preconditioner
+class Identity(NamedTuple):
+    """No preconditioner: ``z = r`` (plain CG). ``rows`` n: compiled code cannot call the
+    method of an empty NamedTuple."""
+
+    rows: int
+
+    def precondition(self, r: np.ndarray, z: np.ndarray) -> None:
+        """``z = r``."""
+        z[:] = r
 
 
 @njit(cache=True, parallel=True, fastmath=FAST)
@@ -155,16 +232,8 @@ def compact_factor(matrix: Matrix, factor: np.ndarray) -> Factor:
         inverse_diagonal[i] = 1.0 / factor[matrix.diagonal[i]]
     return Factor(
         lower_start, lower_indices, lower_data, upper_start, upper_indices, upper_data,
-        inverse_diagonal,
+        inverse_diagonal, matrix.blocks,
     )  # fmt: skip
-
-
-def no_factor() -> Factor:
-    """An empty :class:`Factor`, for plain CG."""
-    start = np.zeros(1, dtype=np.int64)
-    indices = np.empty(0, dtype=np.int32)
-    data = np.empty(0)
-    return Factor(start, indices, data, start, indices, data, np.empty(0))
 
 
 @njit(cache=True)
@@ -190,11 +259,12 @@ def _backward(factor: Factor, z: np.ndarray, first: int, last: int) -> None:
 
 
 @njit(cache=True, parallel=True)
-def _precondition(blocks: np.ndarray, factor: Factor, r: np.ndarray, z: np.ndarray) -> None:
+def _precondition(factor: Factor, r: np.ndarray, z: np.ndarray) -> None:
     """``z = (L L^T)^-1 r``: forward substitution on L's rows, then backward substitution on
-    L^T's rows. The two blocks of ``blocks`` (:class:`Matrix`) in parallel: forward blocks
-    then separator, backward separator then blocks."""
+    L^T's rows. The two blocks of ``factor.blocks`` (:class:`Matrix`) in parallel: forward
+    blocks then separator, backward separator then blocks."""
     n = r.shape[0]
+    blocks = factor.blocks
     bounds = np.array([0, blocks[0], blocks[1]], dtype=np.int64)
     for block in prange(2):
         _forward(factor, r, z, bounds[block], bounds[block + 1])
@@ -214,20 +284,41 @@ def dot(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def conjugate_gradient(
-    matrix: Matrix,
-    factor: Factor,
-    preconditioned: bool,
+def _update(x: np.ndarray, r: np.ndarray, d: np.ndarray, q: np.ndarray, alpha: float) -> float:
+    """``x += alpha d``, ``r -= alpha q``; returns |r|^2 (summed serially, as :func:`dot`)."""
+    total = 0.0
+    for i in range(x.shape[0]):
+        x[i] += alpha * d[i]
+        r[i] -= alpha * q[i]
+        total += r[i] * r[i]
+    return total
+
+
+@njit(cache=True)
+def _direction(d: np.ndarray, z: np.ndarray, beta: float) -> None:
+    """``d = z + beta d``."""
+    for i in range(d.shape[0]):
+        d[i] = z[i] + beta * d[i]
+
+
+@register_jitable
+def preconditioned_cg(
+    operator: LinearOperator,
+    preconditioner: Preconditioner,
     b: np.ndarray,
     x: np.ndarray,
     tolerance: float,
     max_iterations: int,
 ) -> tuple[int, float]:
-    """(Preconditioned) conjugate gradients for ``A x = b``, Eq. (F12), from the initial guess
-    in ``x`` (overwritten by the solution). Stops when ``|b - A x| <= tolerance |b|``.
+    """Preconditioned conjugate gradients for ``A x = b``, Eq. (F12), from the initial guess in
+    ``x`` (overwritten by the solution); A is ``operator``, M ``preconditioner``. Stops when
+    ``|b - A x| <= tolerance |b|``. Returns (iterations, relative residual).
 
-    With ``preconditioned`` the IC(0) factor ``factor`` (:func:`compact_factor`) preconditions;
-    otherwise plain CG (``factor`` unused). Returns (iterations, relative residual).
+    The one CG of the package. Compiled code calls it with the NamedTuples of
+    :func:`linear_operator` and :func:`preconditioner` (:func:`conjugate_gradient`, the soft
+    bell's implicit springs); Python calls it with any objects that have the methods (the
+    deflated solver, whose coarse solve is SuperLU's): its vector work is in compiled kernels
+    either way, with the same floating-point operations in the same order.
     """
     n = b.shape[0]
     norm_b = math.sqrt(dot(b, b))
@@ -237,39 +328,40 @@ def conjugate_gradient(
         x[:] = 0.0
         return 0, 0.0
     r = np.empty(n)
-    multiply(matrix, x, r)
-    for i in range(n):
-        r[i] = b[i] - r[i]
+    operator.apply(x, r)
+    r[:] = b - r
     z = np.empty(n)
-    if preconditioned:
-        _precondition(matrix.blocks, factor, r, z)
-    else:
-        z[:] = r
+    preconditioner.precondition(r, z)
     d = z.copy()
     q = np.empty(n)
     rz = dot(r, z)
     residual = math.sqrt(dot(r, r)) / norm_b
     iterations = 0
     while residual > tolerance and iterations < max_iterations:
-        multiply(matrix, d, q)
+        operator.apply(d, q)
         curvature = dot(d, q)
         if curvature == 0.0 or rz == 0.0:
             break  # the residual is exactly zero in exact arithmetic: nothing left to reduce
-        alpha = rz / curvature
-        for i in range(n):
-            x[i] += alpha * d[i]
-            r[i] -= alpha * q[i]
+        residual = math.sqrt(_update(x, r, d, q, rz / curvature)) / norm_b
         iterations += 1
-        residual = math.sqrt(dot(r, r)) / norm_b
         if not math.isfinite(residual):
             break
-        if preconditioned:
-            _precondition(matrix.blocks, factor, r, z)
-        else:
-            z[:] = r
+        preconditioner.precondition(r, z)
         rz_new = dot(r, z)
-        beta = rz_new / rz
+        _direction(d, z, rz_new / rz)
         rz = rz_new
-        for i in range(n):
-            d[i] = z[i] + beta * d[i]
     return iterations, residual
+
+
+@njit(cache=True)
+def conjugate_gradient(
+    matrix: Matrix,
+    preconditioner: Factor | Identity,
+    b: np.ndarray,
+    x: np.ndarray,
+    tolerance: float,
+    max_iterations: int,
+) -> tuple[int, float]:
+    """:func:`preconditioned_cg` compiled for the PPE: preconditioned by the IC(0) factor
+    (:func:`compact_factor`) or not at all (:class:`Identity`)."""
+    return preconditioned_cg(matrix, preconditioner, b, x, tolerance, max_iterations)

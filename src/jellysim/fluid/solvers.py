@@ -13,11 +13,11 @@ import numpy as np
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.deflation import deflated_cg
 from jellysim.fluid.linalg import (
+    Identity,
     Matrix,
     compact_factor,
     conjugate_gradient,
     incomplete_cholesky,
-    no_factor,
 )
 
 IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
@@ -70,7 +70,7 @@ def _conjugate_gradient(
 ) -> tuple[int, float, float]:
     """Plain CG (no preconditioner), for comparison."""
     iterations, residual = conjugate_gradient(
-        matrix, no_factor(), False, rhs, solution, tolerance, max_iterations
+        matrix, Identity(rhs.shape[0]), rhs, solution, tolerance, max_iterations
     )
     return iterations, residual, 0.0
 
@@ -98,7 +98,7 @@ def _incomplete_cholesky_cg(
         )
     compact = compact_factor(matrix, factor)
     iterations, residual = conjugate_gradient(
-        matrix, compact, True, rhs, solution, tolerance, max_iterations
+        matrix, compact, rhs, solution, tolerance, max_iterations
     )
     return iterations, residual, shift
 
