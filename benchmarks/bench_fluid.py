@@ -34,7 +34,8 @@ import numpy as np
 import jellysim
 from jellysim.config.load import parse_override
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.mps import CoarseSpace, MPSSolver, solve
+from jellysim.fluid.mps import MPSSolver
+from jellysim.fluid.solvers import CoarseSpace, solve
 from jellysim.simulation.fluid import FluidSimulation
 
 CASES: dict[str, tuple[str, dict[str, object]]] = {

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from jellysim.fluid import kernels
+from jellysim.fluid import kernels, neighbours
 from jellysim.fluid.geometry import DUMMY, FLUID, WALL, filled_height, tank, water_block
 from jellysim.fluid.mps import MPSParameters, MPSSolver, lattice_reference
 
@@ -218,7 +218,7 @@ def test_cell_list_equals_brute_force(dim: int) -> None:
     alive = rng.random(n) > 0.1
     rows = rng.random(n) > 0.3
     radius = 0.13
-    start, index, distance = kernels.neighbour_list(position, alive, rows, radius)
+    start, index, distance = neighbours.neighbour_list(position, alive, rows, radius)
     diff = position[:, None, :] - position[None, :, :]
     r = np.sqrt((diff**2).sum(-1))
     for i in range(n):
@@ -246,18 +246,18 @@ def test_verlet_list_cut_to_the_radius_equals_a_fresh_search(dim: int) -> None:
     alive = rng.random(n) > 0.1
     rows = rng.random(n) > 0.3
     radius, skin = 0.12, 0.04
-    candidates = kernels.Neighbours(
-        *kernels.neighbour_list(position, alive, alive, radius + skin), radius + skin
+    candidates = neighbours.Neighbours(
+        *neighbours.neighbour_list(position, alive, alive, radius + skin), radius + skin
     )
     step = rng.normal(size=(n, dim))
     step *= rng.uniform(0.0, 0.5 * skin, (n, 1)) / np.linalg.norm(step, axis=1, keepdims=True)
     moved = position + step
     alive_now = alive & (rng.random(n) > 0.05)  # some die in between
-    assert kernels.largest_displacement(moved, position, alive_now) < 0.5 * skin
-    start, index, distance = kernels.filter_neighbours(
+    assert neighbours.largest_displacement(moved, position, alive_now) < 0.5 * skin
+    start, index, distance = neighbours.filter_neighbours(
         candidates, moved, alive_now, rows, radius, np.empty(0, np.int32), np.empty(0)
     )
-    fresh = kernels.neighbour_list(moved, alive_now, rows, radius)
+    fresh = neighbours.neighbour_list(moved, alive_now, rows, radius)
     assert np.array_equal(start, fresh[0])
     for i in range(n):
         row = slice(start[i], start[i + 1])
@@ -270,11 +270,11 @@ def test_search_writes_into_a_buffer_that_holds_the_list_and_grows_one_that_does
     rng = np.random.default_rng(5)
     position = rng.uniform(0.0, 1.0, (300, 3))
     alive = np.ones(300, dtype=np.bool_)
-    exact = kernels.neighbour_list(position, alive, alive, 0.2)
+    exact = neighbours.neighbour_list(position, alive, alive, 0.2)
     total = int(exact[0][-1])
     for size in (total + 100, total // 2):
         index_buffer, distance_buffer = np.full(size, -7, np.int32), np.zeros(size)
-        start, index, distance = kernels.search_neighbours(
+        start, index, distance = neighbours.search_neighbours(
             position, alive, alive, 0.2, index_buffer, distance_buffer
         )
         assert np.array_equal(start, exact[0])
@@ -302,8 +302,8 @@ def test_explicit_stage_conserves_fluid_momentum_without_gravity(dim: int) -> No
     position, velocity, kind = blob(dim, 1)
     params = MPSParameters(dim=dim, l0=0.01, kinematic_viscosity=0.05)
     solver = MPSSolver(params, position, kind)
-    nb = kernels.Neighbours(
-        *kernels.neighbour_list(position, solver.alive, solver.alive, solver.search_radius),
+    nb = neighbours.Neighbours(
+        *neighbours.neighbour_list(position, solver.alive, solver.alive, solver.search_radius),
         solver.search_radius,
     )
     out_x = np.empty_like(position)
@@ -326,7 +326,7 @@ def test_collision_conserves_momentum(dim: int) -> None:
     position = position + rng.uniform(-0.3, 0.3, position.shape) * 0.01  # many close pairs
     alive = np.ones(kind.shape[0], dtype=np.bool_)
     radius = 0.5 * 0.01
-    nb = kernels.Neighbours(*kernels.neighbour_list(position, alive, alive, 0.021), 0.021)
+    nb = neighbours.Neighbours(*neighbours.neighbour_list(position, alive, alive, 0.021), 0.021)
     out_x = np.empty_like(position)
     out_u = np.empty_like(velocity)
     kernels.collision(position, velocity, kind, alive, nb, radius, 0.2, 1e-3, out_x, out_u)

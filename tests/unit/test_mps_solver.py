@@ -12,9 +12,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from jellysim.errors import SimulationUnstable
-from jellysim.fluid import deflation, kernels, mps
+from jellysim.fluid import deflation, linalg, mps, solvers
 from jellysim.fluid.geometry import DUMMY, FLUID, tank, water_block
-from jellysim.fluid.mps import FluidDiverged, MPSParameters, MPSSolver, solve
+from jellysim.fluid.mps import MPSParameters, MPSSolver
+from jellysim.fluid.solvers import FluidDiverged, solve
 
 A = 0.1  # column width, m
 L0 = A / 20
@@ -29,7 +30,7 @@ def dam_break(**overrides: object) -> MPSSolver:
 
 
 @pytest.fixture(scope="module")
-def released() -> tuple[kernels.Matrix, np.ndarray, mps.CoarseSpace]:
+def released() -> tuple[linalg.Matrix, np.ndarray, solvers.CoarseSpace]:
     """The PPE of a dam break 20 steps after release (matrix, right-hand side and the rows'
     positions for the deflated solver's aggregates of 4 l0)."""
     solver = dam_break()
@@ -37,17 +38,17 @@ def released() -> tuple[kernels.Matrix, np.ndarray, mps.CoarseSpace]:
     for _ in range(20):
         solver.step(dt)
     built = solver.poisson_system(dt)
-    coarse = mps.CoarseSpace(solver.position[built.particles], solver.domain_min, 4 * L0)
+    coarse = solvers.CoarseSpace(solver.position[built.particles], solver.domain_min, 4 * L0)
     return built.matrix, built.rhs, coarse
 
 
 @pytest.fixture(scope="module")
-def system(released) -> tuple[kernels.Matrix, np.ndarray]:
+def system(released) -> tuple[linalg.Matrix, np.ndarray]:
     """The PPE of :func:`released` (matrix and right-hand side)."""
     return released[0], released[1]
 
 
-def to_scipy(matrix: kernels.Matrix) -> sp.csr_matrix:
+def to_scipy(matrix: linalg.Matrix) -> sp.csr_matrix:
     n = matrix.indptr.shape[0] - 1
     return sp.csr_matrix((matrix.data, matrix.indices, matrix.indptr), shape=(n, n))
 
@@ -174,7 +175,7 @@ def test_deflated_solve_is_the_same_with_one_and_two_threads(released) -> None:
 
 
 def test_two_block_ordering_uncouples_the_blocks_and_solves_the_same_system(monkeypatch) -> None:
-    """With the two-block order (kernels.number_unknowns) no entry joins block 0 and block 1,
+    """With the two-block order (poisson.number_unknowns) no entry joins block 0 and block 1,
     the separator is a thin slab, and ICCG gives the one-block solution to its tolerance in
     about as many iterations."""
     solver = dam_break()
@@ -213,10 +214,10 @@ def test_ic0_breakdown_is_shifted() -> None:
     indptr = np.array([0, 2, 4])
     indices = np.array([0, 1, 0, 1], dtype=np.int32)
     data = np.array([1.0, 1.05, 1.05, 1.0])
-    matrix = kernels.Matrix(indptr, indices, data, np.array([0, 3]), np.array([2, 2]))
+    matrix = linalg.Matrix(indptr, indices, data, np.array([0, 3]), np.array([2, 2]))
     factor = np.zeros(4)
-    assert not kernels.incomplete_cholesky(matrix, 0.0, factor)
-    assert kernels.incomplete_cholesky(matrix, 0.1, factor)
+    assert not linalg.incomplete_cholesky(matrix, 0.0, factor)
+    assert linalg.incomplete_cholesky(matrix, 0.1, factor)
 
 
 @pytest.mark.parametrize("method", ["iccg", "deflated"])
@@ -421,10 +422,10 @@ def test_pressure_solvers_are_chosen_by_name() -> None:
     from jellysim.config.schema import Fluid
 
     offered = {f.name: f for f in dataclasses.fields(Fluid)}["solver"].metadata["choices"]
-    assert tuple(offered) == tuple(mps.PRESSURE_SOLVERS) == ("iccg", "cg", "deflated")
+    assert tuple(offered) == tuple(solvers.PRESSURE_SOLVERS) == ("iccg", "cg", "deflated")
     with pytest.raises(ValueError, match="allowed: iccg, cg, deflated"):
         MPSParameters(dim=2, l0=L0, solver="amg")
-    matrix = kernels.Matrix(  # A = [2], one row, one block
+    matrix = linalg.Matrix(  # A = [2], one row, one block
         np.array([0, 1], dtype=np.int64), np.array([0], dtype=np.int32), np.array([2.0]),
         np.array([0], dtype=np.int64), np.array([1, 1], dtype=np.int64),
     )  # fmt: skip

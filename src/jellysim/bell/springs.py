@@ -8,9 +8,12 @@ free of write conflicts and bitwise reproducible (STYLE rule 4).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+
+from jellysim.fluid.linalg import Identity, linear_operator, preconditioned_cg
 
 
 @njit(cache=True, parallel=True)
@@ -96,13 +99,33 @@ def _stiffness_product(
             out[i, k] = total
 
 
-@njit(cache=True)
-def _inner(a: np.ndarray, b: np.ndarray) -> float:
-    total = 0.0
-    for i in range(a.shape[0]):
-        for k in range(a.shape[1]):
-            total += a[i, k] * b[i, k]
-    return total
+@linear_operator
+class _BackwardEuler(NamedTuple):
+    """The matrix ``m I - dt^2 K`` (kg) of :func:`implicit_velocity_change` on a velocity change
+    flattened to (3B,) m/s, giving (3B,) kg m/s; K as in :func:`_stiffness_product`, whose
+    arrays these are."""
+
+    springs: np.ndarray  # (S, 2) int
+    normal: np.ndarray  # (S, 3)
+    along: np.ndarray  # (S,) N/m
+    across: np.ndarray  # (S,) N/m
+    start: np.ndarray  # (B + 1,)
+    edges: np.ndarray
+    signs: np.ndarray
+    mass: float  # kg
+    h2: float  # dt^2, s2
+    work: np.ndarray  # (S, 3) scratch
+    product: np.ndarray  # (B, 3) scratch, K x
+
+    def apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        """``out = m x - dt^2 K x``."""
+        _stiffness_product(
+            self.springs, self.normal, self.along, self.across, self.start, self.edges,
+            self.signs, x.reshape((-1, 3)), self.work, self.product,
+        )  # fmt: skip
+        product = self.product.reshape(-1)
+        for i in range(x.shape[0]):
+            out[i] = self.mass * x[i] - self.h2 * product[i]
 
 
 @njit(cache=True)
@@ -125,7 +148,8 @@ def implicit_velocity_change(
     """Linearised backward Euler for the springs [Baraff & Witkin 1998]: the velocity change
     (B, 3) m/s over ``dt`` (s) solving ``(m I - dt^2 K) dv = dt (F + dt K v)``, with F
     ``force`` (B, 3) N at ``position``, v ``velocity``, m ``mass`` (kg) and K = dF/dr there,
-    into ``out``; returns (CG iterations, relative residual).
+    into ``out``; returns (CG iterations, relative residual) of
+    :func:`jellysim.fluid.linalg.preconditioned_cg` (unpreconditioned).
 
     K's block for spring e, ``k (n n^T + max(1 - L / |d|, 0) (I - n n^T))`` (d = r_b - r_a,
     n = d / |d|), drops the compressed springs' negative transverse part so that the matrix
@@ -155,29 +179,12 @@ def implicit_velocity_change(
     # right side and the explicit guess dv = dt F / m
     _stiffness_product(springs, normal, along, across, start, edges, signs, velocity, work, product)
     rhs = dt * (force + dt * product)
-    h2 = dt * dt
     for i in range(out.shape[0]):
         for k in range(3):
             out[i, k] = dt * force[i, k] / mass
-    _stiffness_product(springs, normal, along, across, start, edges, signs, out, work, product)
-    residual = rhs - (mass * out - h2 * product)
-    norm_rhs = math.sqrt(_inner(rhs, rhs))
-    if norm_rhs == 0.0:
-        out[:] = 0.0
-        return 0, 0.0
-    direction = residual.copy()
-    rr = _inner(residual, residual)
-    iterations = 0
-    while math.sqrt(rr) > tolerance * norm_rhs and iterations < max_iterations:
-        _stiffness_product(
-            springs, normal, along, across, start, edges, signs, direction, work, product
-        )
-        applied = mass * direction - h2 * product
-        alpha = rr / _inner(direction, applied)
-        out += alpha * direction
-        residual -= alpha * applied
-        rr_new = _inner(residual, residual)
-        direction = residual + (rr_new / rr) * direction
-        rr = rr_new
-        iterations += 1
-    return iterations, math.sqrt(rr) / norm_rhs
+    system = _BackwardEuler(
+        springs, normal, along, across, start, edges, signs, mass, dt * dt, work, product
+    )
+    return preconditioned_cg(
+        system, Identity(rhs.size), rhs.reshape(-1), out.reshape(-1), tolerance, max_iterations
+    )

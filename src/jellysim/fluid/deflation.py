@@ -25,7 +25,6 @@ threads.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
@@ -33,7 +32,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 from numba import njit, prange
 
-from jellysim.fluid.kernels import FAST, Matrix, dot, multiply
+from jellysim.fluid.linalg import FAST, Matrix, dot, multiply, preconditioned_cg
 
 
 def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[np.ndarray, int]:
@@ -199,23 +198,6 @@ def _prolong_add(key: np.ndarray, coarse: np.ndarray, y: np.ndarray, out: np.nda
         out[i] = y[i] + coarse[key[i]]
 
 
-@njit(cache=True)
-def _update(x: np.ndarray, r: np.ndarray, d: np.ndarray, q: np.ndarray, alpha: float) -> float:
-    """``x += alpha d``, ``r -= alpha q``; returns |r|^2."""
-    total = 0.0
-    for i in range(x.shape[0]):
-        x[i] += alpha * d[i]
-        r[i] -= alpha * q[i]
-        total += r[i] * r[i]
-    return total
-
-
-@njit(cache=True)
-def _direction(d: np.ndarray, z: np.ndarray, beta: float) -> None:
-    for i in range(d.shape[0]):
-        d[i] = z[i] + beta * d[i]
-
-
 class Deflation:
     """The coarse space of one PPE: aggregates, W = Z^T A, E's factor and D^-1 (built per
     solve)."""
@@ -223,6 +205,7 @@ class Deflation:
     def __init__(self, matrix: Matrix, position: np.ndarray, origin: np.ndarray, size: float):
         self.key, self.m = aggregates(position, origin, size)
         self.inverse_diagonal = 1.0 / matrix.data[matrix.diagonal]
+        self._smoothed = np.empty(matrix.diagonal.shape[0])  # y of :meth:`precondition`
         self.restriction = restricted_operator(matrix, self.key, self.m)
         coarse = coarse_operator(self.restriction, self.key, self.m)
         # E is symmetric positive definite: SymmetricMode takes the diagonal pivots of the
@@ -237,9 +220,10 @@ class Deflation:
         coarse = self._lu.solve(restrict(self.key, self.m, v))
         _prolong_add(self.key, coarse, y, out)
 
-    def precondition(self, r: np.ndarray, z: np.ndarray, y: np.ndarray) -> None:
+    def precondition(self, r: np.ndarray, z: np.ndarray) -> None:
         """``z = M^-1 r = y + Z E^-1 Z^T (r - A y)``, ``y = D^-1 r`` (A-DEF2 with Jacobi; one
-        product with W instead of A); ``y`` scratch (n,)."""
+        product with W instead of A)."""
+        y = self._smoothed
         coarse = self._lu.solve(_smooth(self.restriction, self.key, self.inverse_diagonal, r, y))
         _prolong_add(self.key, coarse, y, z)
 
@@ -256,14 +240,11 @@ def deflated_cg(
 ) -> tuple[int, float]:
     """CG preconditioned by :class:`Deflation` for ``A x = b``, from the guess in ``x``
     (overwritten by the solution); rows at ``position`` ((n, D) m), aggregates ``size`` (m)
-    wide on a lattice from ``origin``. Stops when ``|b - A x| <= tolerance |b|``, like
-    :func:`jellysim.fluid.kernels.conjugate_gradient`. Returns (iterations, relative
+    wide on a lattice from ``origin``. The iterations are :func:`jellysim.fluid.linalg.
+    preconditioned_cg`'s, from ``x0 + Z E^-1 Z^T (b - A x0)``. Returns (iterations, relative
     residual)."""
     n = b.shape[0]
-    norm_b = math.sqrt(dot(b, b))
-    if n == 0:
-        return 0, 0.0
-    if norm_b == 0.0:
+    if n == 0 or dot(b, b) == 0.0:  # nothing to solve, as preconditioned_cg finds: no E to build
         x[:] = 0.0
         return 0, 0.0
     deflation = Deflation(matrix, position, origin, size)
@@ -271,25 +252,4 @@ def deflated_cg(
     multiply(matrix, x, r)
     r[:] = b - r
     deflation.coarse_correction(r, x.copy(), x)  # x0 + Z E^-1 Z^T r0: Z^T r = 0 from here on
-    multiply(matrix, x, r)
-    r[:] = b - r
-    z, y, q = np.empty(n), np.empty(n), np.empty(n)
-    deflation.precondition(r, z, y)
-    d = z.copy()
-    rz = dot(r, z)
-    residual = math.sqrt(dot(r, r)) / norm_b
-    iterations = 0
-    while residual > tolerance and iterations < max_iterations:
-        multiply(matrix, d, q)
-        curvature = dot(d, q)
-        if curvature == 0.0 or rz == 0.0:
-            break  # the residual is exactly zero in exact arithmetic: nothing left to reduce
-        residual = math.sqrt(_update(x, r, d, q, rz / curvature)) / norm_b
-        iterations += 1
-        if not math.isfinite(residual):
-            break
-        deflation.precondition(r, z, y)
-        rz_new = dot(r, z)
-        _direction(d, z, rz_new / rz)
-        rz = rz_new
-    return iterations, residual
+    return preconditioned_cg(matrix, deflation, b, x, tolerance, max_iterations)

@@ -23,14 +23,22 @@ import math
 import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple, Protocol
+from typing import NamedTuple
 
 import numpy as np
 
-from jellysim.errors import SimulationUnstable
 from jellysim.fluid import kernels
-from jellysim.fluid.deflation import deflated_cg
 from jellysim.fluid.geometry import DUMMY, FLUID, ROW_HEIGHT, WALL, check_lattice
+from jellysim.fluid.linalg import Matrix
+from jellysim.fluid.neighbours import (
+    Neighbours,
+    filter_neighbours,
+    largest_displacement,
+    listed,
+    search_neighbours,
+)
+from jellysim.fluid.poisson import assemble_poisson, number_unknowns
+from jellysim.fluid.solvers import PRESSURE_SOLVERS, CoarseSpace, FluidDiverged, solve
 
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count", "either-density")
@@ -44,23 +52,10 @@ GRADIENTS = ("standard", "corrected")
 # neighbours (at sqrt(8/3) and 2 l0): n = 0.964 n0; the surface layer has 0.69 n0. Same 0.93.
 SURFACE_THRESHOLD = {"square": 0.97, "hexagonal": 0.93, "fcc": 0.93}
 
-IC_SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)  # diagonal shifts tried in turn when IC(0) breaks down
 # PPEs with at least this many unknowns are ordered in two uncoupled blocks and a separator, so
-# that IC(0) and its triangular solves run on two threads (kernels.number_unknowns); smaller
+# that IC(0) and its triangular solves run on two threads (number_unknowns); smaller
 # ones keep one block: they are fast anyway, and the ordering can cost an iteration.
 TWO_BLOCK_ROWS = 16384
-
-
-class FluidDiverged(SimulationUnstable):
-    """The pressure solve did not converge, or the state stopped being finite (exit status 3).
-
-    ``time`` is the solver's own clock (the sum of the steps taken), in s.
-    """
-
-    def __init__(self, message: str, *, time: float, iterations: int, residual: float) -> None:
-        super().__init__(message, time=time)
-        self.iterations = iterations
-        self.residual = residual
 
 
 @dataclass(frozen=True)
@@ -247,15 +242,15 @@ def lattice_reference(dim: int, l0: float, re: float, lattice: str = "square") -
 class PoissonSystem(NamedTuple):
     """``A p = b`` over the unknown particles (``unknown`` (N,) bool): A in 1/m2, b (n,) Pa/m2,
     row r standing for particle ``particles[r]`` ((n,) int64; rows are in the two-block order
-    of :class:`kernels.Matrix`); ``surface`` the number of free-surface particles;
+    of :class:`Matrix`); ``surface`` the number of free-surface particles;
     ``neighbours`` the list at the positions it was built on."""
 
-    matrix: kernels.Matrix
+    matrix: Matrix
     rhs: np.ndarray
     unknown: np.ndarray
     particles: np.ndarray
     surface: int
-    neighbours: kernels.Neighbours
+    neighbours: Neighbours
 
 
 @dataclass
@@ -344,12 +339,12 @@ class MPSSolver:
         self._row_of = np.empty(n, dtype=np.int64)
         # Verlet list (neighbour_skin > 0): candidates within search_radius + skin of each
         # particle at the reference positions; None until the first use.
-        self._candidates: kernels.Neighbours | None = None
+        self._candidates: Neighbours | None = None
         self._reference_position = np.empty_like(self.position)
         self._reference_alive = np.zeros(n, dtype=np.bool_)
         self.searches = 0  # cell searches so far (neighbour lists built from scratch)
-        # Buffers kept from step to step for the large arrays (kernels._room): the lists at r^k
-        # and r*, the Verlet list, and the PPE matrix (two orders, integer and real each).
+        # Buffers kept from step to step for the large arrays (fluid.neighbours.room): the lists
+        # at r^k and r*, the Verlet list, and the PPE matrix (two orders, integer and real each).
         self._buffers: dict[str, list[np.ndarray]] = {
             name: [np.empty(0, dtype=np.int32), np.empty(0)]
             for name in ("start", "star", "candidates")
@@ -501,7 +496,7 @@ class MPSSolver:
         lap("correction")
         return stats
 
-    def neighbours(self, rows: np.ndarray, buffer: str | None = None) -> kernels.Neighbours:
+    def neighbours(self, rows: np.ndarray, buffer: str | None = None) -> Neighbours:
         """The neighbours within ``search_radius`` of the live particles with ``rows[i]`` ((N,)
         bool, no dummies) at the current positions. In arrays of their own, or with
         ``buffer`` in the solver's buffers of that name ("start" for the list at the start of a
@@ -516,14 +511,14 @@ class MPSSolver:
             self.searches += 1
             return self._keep(
                 buffer,
-                kernels.search_neighbours(
+                search_neighbours(
                     self.position, self.alive, rows, self.search_radius, *self._buffer(buffer)
                 ),
                 self.search_radius,
             )
         if (
             self._candidates is None
-            or kernels.largest_displacement(self.position, self._reference_position, self.alive)
+            or largest_displacement(self.position, self._reference_position, self.alive)
             > 0.5 * p.neighbour_skin * p.l0
         ):
             self._reference_position[:] = self.position
@@ -532,7 +527,7 @@ class MPSSolver:
         assert self._candidates is not None
         return self._keep(
             buffer,
-            kernels.filter_neighbours(
+            filter_neighbours(
                 self._candidates,
                 self.position,
                 self.alive,
@@ -545,7 +540,7 @@ class MPSSolver:
 
     def _keep(
         self, buffer: str | None, arrays: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
-    ) -> kernels.Neighbours:
+    ) -> Neighbours:
         """A list returned by a kernel into the buffers ``buffer``: the buffers (perhaps grown)
         kept for next time (``buffer`` None: the arrays are the list's own), the list cut to its
         length."""
@@ -553,7 +548,7 @@ class MPSSolver:
         if buffer is not None:
             self._buffers[buffer] = [index, distance]
         end = int(start[-1])
-        return kernels.Neighbours(start, index[:end], distance[:end], radius)
+        return Neighbours(start, index[:end], distance[:end], radius)
 
     def _buffer(self, name: str | None) -> list[np.ndarray]:
         """The buffers ``name`` (index and distance), or empty arrays for ``None``."""
@@ -570,7 +565,7 @@ class MPSSolver:
         self._candidates = None  # its arrays are the buffers about to be overwritten
         self._candidates = self._keep(
             "candidates",
-            kernels.search_neighbours(
+            search_neighbours(
                 self._reference_position,
                 self._reference_alive,
                 self.kind != DUMMY,
@@ -580,7 +575,7 @@ class MPSSolver:
             radius,
         )
 
-    def _wet(self, start: kernels.Neighbours) -> np.ndarray | None:
+    def _wet(self, start: Neighbours) -> np.ndarray | None:
         """The particles that need a row at r*: the live fluid particles and the walls that
         were within the search radius of one at the start of the step (``start``, the list
         at r^k, fluid rows), provided no particle has moved by more than the search radius
@@ -597,12 +592,10 @@ class MPSSolver:
         margin = self.search_radius - p.re_number_density * p.l0
         fluid_rows = np.flatnonzero(self.alive & (self.kind == FLUID))
         if start.radius < self.search_radius or (
-            kernels.largest_displacement(self.position, self._start_position, self.alive) > margin
+            largest_displacement(self.position, self._start_position, self.alive) > margin
         ):
             return None
-        return kernels.listed(start, fluid_rows) & (self.kind == WALL) | (
-            self.alive & (self.kind == FLUID)
-        )
+        return listed(start, fluid_rows) & (self.kind == WALL) | (self.alive & (self.kind == FLUID))
 
     def poisson_system(
         self,
@@ -640,7 +633,7 @@ class MPSSolver:
             surface |= start_density < p.beta * c.n0  # n^k too (docs/theory/fluid.md F7b)
         surface &= solid
         unknown = solid & ~surface
-        blocks = kernels.number_unknowns(
+        blocks = number_unknowns(
             unknown, self.position, c.re_laplacian, TWO_BLOCK_ROWS, self._row_of
         )
         n_rows = int(blocks[2])
@@ -650,7 +643,7 @@ class MPSSolver:
         ordered = p.solver != "deflated"  # the deflated solver needs no column order
         no_int, no_real = np.empty(0, dtype=np.int32), np.empty(0)
         buffers = self._matrix_buffers if reuse else (no_int, no_real, no_int, no_real)
-        indptr, indices, data, diagonal, spare_indices, spare_data = kernels.assemble_poisson(
+        indptr, indices, data, diagonal, spare_indices, spare_data = assemble_poisson(
             nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered, buffers
         )
         if reuse and ordered:
@@ -658,14 +651,14 @@ class MPSSolver:
         elif reuse:
             self._matrix_buffers = (indices, data, spare_indices, spare_data)
         nnz = int(indptr[-1])
-        matrix = kernels.Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy())
+        matrix = Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy())
         rhs = self.poisson_source(dt, particles, nb)
         if clock is not None:
             clock("assembly")
         return PoissonSystem(matrix, rhs, unknown, particles, int(surface.sum()), nb)
 
     def poisson_source(
-        self, dt: float, particles: np.ndarray, neighbours: kernels.Neighbours
+        self, dt: float, particles: np.ndarray, neighbours: Neighbours
     ) -> np.ndarray:
         """Right-hand side b of ``A p = b`` for the unknown particles ``particles`` ((n,) int64,
         in row order) (Pa/m2), Eq. (F8)-(F9):
@@ -734,139 +727,15 @@ def substep(remaining: float, limit: float) -> float:
     return remaining / math.ceil(remaining / limit)
 
 
-class CoarseSpace(NamedTuple):
-    """Where the rows of a PPE are, for the deflated solver's aggregates: ``position`` (n, D) m
-    in row order, the aggregates' lattice ``origin`` (D,) m and cell ``size`` m."""
-
-    position: np.ndarray
-    origin: np.ndarray
-    size: float
-
-
-class PressureSolver(Protocol):
-    """A pressure solver of the registry :data:`PRESSURE_SOLVERS`: solves ``A p = b`` in place
-    in ``solution`` (initial guess in, answer out) to the relative residual ``tolerance``, and
-    returns (iterations, relative residual, IC shift used, 0 when none)."""
-
-    def __call__(
-        self,
-        matrix: kernels.Matrix,
-        rhs: np.ndarray,
-        solution: np.ndarray,
-        tolerance: float,
-        max_iterations: int,
-        coarse: CoarseSpace | None,
-    ) -> tuple[int, float, float]: ...
-
-
-def _conjugate_gradient(
-    matrix: kernels.Matrix,
-    rhs: np.ndarray,
-    solution: np.ndarray,
-    tolerance: float,
-    max_iterations: int,
-    coarse: CoarseSpace | None,
-) -> tuple[int, float, float]:
-    """Plain CG (no preconditioner), for comparison."""
-    iterations, residual = kernels.conjugate_gradient(
-        matrix, kernels.no_factor(), False, rhs, solution, tolerance, max_iterations
-    )
-    return iterations, residual, 0.0
-
-
-def _incomplete_cholesky_cg(
-    matrix: kernels.Matrix,
-    rhs: np.ndarray,
-    solution: np.ndarray,
-    tolerance: float,
-    max_iterations: int,
-    coarse: CoarseSpace | None,
-) -> tuple[int, float, float]:
-    """ICCG: IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a
-    pivot is not positive."""
-    factor = np.zeros_like(matrix.data)
-    for shift in (0.0, *IC_SHIFTS):
-        if kernels.incomplete_cholesky(matrix, shift, factor):
-            break
-    else:
-        raise FluidDiverged(
-            "IC(0) broke down even with the largest diagonal shift",
-            time=math.nan,
-            iterations=0,
-            residual=math.inf,
-        )
-    compact = kernels.compact_factor(matrix, factor)
-    iterations, residual = kernels.conjugate_gradient(
-        matrix, compact, True, rhs, solution, tolerance, max_iterations
-    )
-    return iterations, residual, shift
-
-
-def _deflated_cg(
-    matrix: kernels.Matrix,
-    rhs: np.ndarray,
-    solution: np.ndarray,
-    tolerance: float,
-    max_iterations: int,
-    coarse: CoarseSpace | None,
-) -> tuple[int, float, float]:
-    """CG with Jacobi and a coarse problem on aggregates of particles (``coarse`` required;
-    :mod:`jellysim.fluid.deflation`)."""
-    if coarse is None:
-        raise ValueError("the deflated solver needs the rows' positions (coarse)")
-    try:
-        iterations, residual = deflated_cg(
-            matrix, *coarse, rhs, solution, tolerance, max_iterations
-        )
-    except RuntimeError as error:  # SuperLU: a singular coarse matrix (A not definite)
-        raise FluidDiverged(
-            f"the deflated solver's coarse problem could not be factored ({error})",
-            time=math.nan,
-            iterations=0,
-            residual=math.inf,
-        ) from None
-    return iterations, residual, 0.0
-
-
-# The pressure solvers by the name a scene gives (fluid.solver); config.schema lists the same
-# names (a unit test holds the two together).
-PRESSURE_SOLVERS: dict[str, PressureSolver] = {
-    "iccg": _incomplete_cholesky_cg,
-    "cg": _conjugate_gradient,
-    "deflated": _deflated_cg,
-}
-
-
-def solve(
-    matrix: kernels.Matrix,
-    rhs: np.ndarray,
-    solution: np.ndarray,
-    method: str = "iccg",
-    tolerance: float = 1e-8,
-    max_iterations: int = 2000,
-    coarse: CoarseSpace | None = None,
-) -> tuple[int, float, float]:
-    """Solve the PPE in place in ``solution`` (initial guess in, answer out) by the solver of
-    :data:`PRESSURE_SOLVERS` named ``method`` ("iccg", "cg" or "deflated", which needs
-    ``coarse``). Returns (iterations, relative residual, IC shift used)."""
-    if method not in PRESSURE_SOLVERS:
-        raise ValueError(f"solver = {method!r}; allowed: {', '.join(PRESSURE_SOLVERS)}")
-    return PRESSURE_SOLVERS[method](matrix, rhs, solution, tolerance, max_iterations, coarse)
-
-
 __all__ = [
     "DUMMY",
     "FLUID",
     "WALL",
-    "CoarseSpace",
     "FluidDiverged",
     "LatticeReference",
     "MPSParameters",
     "MPSSolver",
-    "PRESSURE_SOLVERS",
-    "PressureSolver",
     "StepStats",
     "lattice_reference",
-    "solve",
     "substep",
 ]

@@ -1,0 +1,339 @@
+"""Neighbour search of the MPS fluid: the cell list, Verlet-list filtering and their helpers.
+
+Positions ``(N, D)`` float64 in m (D = 2 or 3), ``alive (N,)`` bool. Every parallel loop is a
+gather: particle i reads the cells around it and writes only its own row, so the lists are
+bitwise identical whatever the number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+
+
+class Neighbours(NamedTuple):
+    """Neighbour list in CSR form: particle i's neighbours are ``indices[start[i]:start[i+1]]``
+    (live particles within ``radius`` of it, itself excluded) at distances ``distance`` (m)."""
+
+    start: np.ndarray  # (N + 1,) int64
+    indices: np.ndarray  # (M,) int32 (a quarter less to write and read than int64)
+    distance: np.ndarray  # (M,) float64
+    radius: float  # m
+
+
+# Cells of side radius / CELLS_PER_RADIUS: particle i scans the (2 CELLS_PER_RADIUS + 1)^D cells
+# around its own, a volume of (2 + 1 / CELLS_PER_RADIUS)^D radius^D (27 radius^3 with cells of
+# side radius, 15.6 with half that).
+CELLS_PER_RADIUS = 2
+
+
+@njit(cache=True)
+def room(buffer: np.ndarray, size: int) -> np.ndarray:
+    """``buffer`` if it holds ``size`` entries, else a new one a quarter larger than that.
+
+    The large arrays of a step (neighbour lists, the PPE matrix) are written into buffers the
+    solver keeps from step to step: a fresh array of tens of megabytes is mapped anew by the
+    allocator each time, and touching its pages for the first time cost more than filling
+    them (tank-3d at 54,000: 1.1 steps/s with fresh arrays, docs/performance.md)."""
+    if buffer.shape[0] >= size:
+        return buffer
+    return np.empty(size + size // 4, dtype=buffer.dtype)
+
+
+class _Grid(NamedTuple):
+    """The cell list of :func:`neighbour_list`, always three axes (a 2-D grid has one cell
+    along z and zero z coordinates, so that the 2-D search is the 3-D one with its loops over z
+    cut to one cell and distances bit for bit the same). Cells are numbered with x fastest;
+    members of a cell are in particle order, and the cells along x are one run of members."""
+
+    cell: np.ndarray  # (N, 3) int64, the cell coordinates of each live particle
+    shape: np.ndarray  # (3,) int64
+    stride: np.ndarray  # (3,) int64
+    start: np.ndarray  # (cells + 1,) int64, members of cell c are start[c]:start[c + 1]
+    member: np.ndarray  # (M,) int64, particle indices in cell order
+    member_position: np.ndarray  # (3, M) float64, their coordinates, one contiguous run per axis
+    position: np.ndarray  # (3, N) float64, every particle's coordinates, per axis
+
+
+@njit(cache=True)
+def _grid(position: np.ndarray, alive: np.ndarray, radius: float) -> _Grid:
+    """Cells of side ``radius / CELLS_PER_RADIUS`` over the live particles' bounding box, filled
+    by a stable counting sort that also copies the members' coordinates in cell order."""
+    n, dim = position.shape
+    coordinates = np.zeros((3, n))
+    for i in range(n):
+        for k in range(dim):
+            coordinates[k, i] = position[i, k]
+    lower = np.zeros(3)
+    upper = np.zeros(3)
+    lower[:dim] = np.inf
+    upper[:dim] = -np.inf
+    for i in range(n):
+        if alive[i]:
+            for k in range(dim):
+                lower[k] = min(lower[k], coordinates[k, i])
+                upper[k] = max(upper[k], coordinates[k, i])
+    inverse = CELLS_PER_RADIUS / radius
+    shape = np.ones(3, dtype=np.int64)
+    for k in range(dim):
+        if upper[k] >= lower[k]:
+            shape[k] = int((upper[k] - lower[k]) * inverse) + 1
+    stride = np.array([1, shape[0], shape[0] * shape[1]], dtype=np.int64)
+    n_cells = stride[2] * shape[2]
+    cell_of = np.full(n, -1, dtype=np.int64)
+    cell = np.zeros((n, 3), dtype=np.int64)
+    start = np.zeros(n_cells + 1, dtype=np.int64)
+    for i in range(n):
+        if alive[i]:
+            c = 0
+            for k in range(dim):
+                q = min(int((coordinates[k, i] - lower[k]) * inverse), shape[k] - 1)
+                cell[i, k] = q
+                c += q * stride[k]
+            cell_of[i] = c
+            start[c + 1] += 1
+    for c in range(n_cells):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    member = np.empty(start[n_cells], dtype=np.int64)
+    member_position = np.zeros((3, start[n_cells]))
+    for i in range(n):
+        if cell_of[i] >= 0:
+            m = fill[cell_of[i]]
+            member[m] = i
+            for k in range(3):
+                member_position[k, m] = coordinates[k, i]
+            fill[cell_of[i]] += 1
+    return _Grid(cell, shape, stride, start, member, member_position, coordinates)
+
+
+@njit(cache=True)
+def _scan_cells(
+    i: int,
+    cell: np.ndarray,
+    shape: np.ndarray,
+    stride: np.ndarray,
+    start: np.ndarray,
+    member: np.ndarray,
+    member_position: np.ndarray,
+    position: np.ndarray,
+    radius2: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+    slot: int,
+) -> int:
+    """Particle i's neighbours closer than sqrt(radius2) in the cells around its own, in
+    cell order then member order. With ``slot`` < 0 they are only counted; otherwise they are
+    written from ``slot`` on into ``index`` and ``distance``. Returns how many there are.
+
+    The loops are written out for three axes with the coordinates in separate arrays: the
+    compiler then keeps the candidate loop free of inner loops (about twice as fast as a loop
+    over D). The arguments are the fields of :class:`_Grid` (passed one by one: a tuple built
+    inside a parallel function cannot be handed to its parallel loops)."""
+    cx = cell[i, 0]
+    cy = cell[i, 1]
+    cz = cell[i, 2]
+    first_x = max(cx - CELLS_PER_RADIUS, 0)
+    last_x = min(cx + CELLS_PER_RADIUS, shape[0] - 1)
+    xi = position[0, i]
+    yi = position[1, i]
+    zi = position[2, i]
+    mx = member_position[0]
+    my = member_position[1]
+    mz = member_position[2]
+    found = 0
+    for qz in range(max(cz - CELLS_PER_RADIUS, 0), min(cz + CELLS_PER_RADIUS, shape[2] - 1) + 1):
+        for qy in range(
+            max(cy - CELLS_PER_RADIUS, 0), min(cy + CELLS_PER_RADIUS, shape[1] - 1) + 1
+        ):
+            c = qy * stride[1] + qz * stride[2]
+            first = start[c + first_x]
+            last = start[c + last_x + 1]
+            if slot < 0:
+                for m in range(first, last):
+                    dx = mx[m] - xi
+                    dy = my[m] - yi
+                    dz = mz[m] - zi
+                    found += dx * dx + dy * dy + dz * dz < radius2
+            else:
+                for m in range(first, last):
+                    dx = mx[m] - xi
+                    dy = my[m] - yi
+                    dz = mz[m] - zi
+                    r2 = dx * dx + dy * dy + dz * dz
+                    if r2 < radius2:
+                        j = member[m]
+                        if j != i:
+                            index[slot + found] = j
+                            distance[slot + found] = math.sqrt(r2)
+                            found += 1
+    if slot < 0:
+        found -= 1  # i itself, at distance 0
+    return found
+
+
+@njit(cache=True, parallel=True)
+def search_neighbours(
+    position: np.ndarray,
+    alive: np.ndarray,
+    rows: np.ndarray,
+    radius: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cell-list search: for every live particle i with ``rows[i]`` ((N,) bool), all live
+    particles closer than ``radius`` (m); other rows are empty (such particles still appear as
+    neighbours of others).
+
+    Cells of side ``radius / CELLS_PER_RADIUS`` (:func:`_grid`); particle i scans the cells
+    within ``CELLS_PER_RADIUS`` of its own along each axis, once to count and once to fill.
+    Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
+    within a row the order is fixed (cell order, then particle index). ``indices`` and
+    ``distance`` are the buffers ``index`` ((K,) int32) and ``distance`` ((K,) float64) when
+    they hold the list, else new ones (:func:`room`), and run past the list's end ``start[N]``.
+    """
+    n = position.shape[0]
+    cell, shape, stride, start, member, member_position, coordinates = _grid(
+        position, alive, radius
+    )
+    radius2 = radius * radius
+    # The rows to fill, compacted: the parallel loops split their iterations evenly between
+    # the threads, and rows are not spread evenly over the particles (water first, then the
+    # tank's walls mixed with its row-less dummies).
+    active = np.flatnonzero(alive & rows)
+    n_active = active.shape[0]
+    row_count = np.zeros(n + 1, dtype=np.int64)
+    none_i = np.empty(0, dtype=np.int32)
+    none_f = np.empty(0)
+    for a in prange(n_active):  # first pass: count each row
+        i = active[a]
+        row_count[i + 1] = _scan_cells(
+            i, cell, shape, stride, start, member, member_position, coordinates, radius2,
+            none_i, none_f, -1,
+        )  # fmt: skip
+    for i in range(n):
+        row_count[i + 1] += row_count[i]
+    index = room(index, int(row_count[n]))
+    distance = room(distance, int(row_count[n]))
+    for a in prange(n_active):  # second pass: fill each row
+        i = active[a]
+        _scan_cells(
+            i, cell, shape, stride, start, member, member_position, coordinates, radius2,
+            index, distance, row_count[i],
+        )  # fmt: skip
+    return row_count, index, distance
+
+
+@njit(cache=True)
+def neighbour_list(
+    position: np.ndarray, alive: np.ndarray, rows: np.ndarray, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`search_neighbours` into arrays of the list's own length."""
+    start, index, distance = search_neighbours(
+        position, alive, rows, radius, np.empty(0, dtype=np.int32), np.empty(0)
+    )
+    return start, index[: start[-1]].copy(), distance[: start[-1]].copy()
+
+
+@njit(cache=True)
+def _filter_row(
+    i: int,
+    candidates: Neighbours,
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    alive: np.ndarray,
+    radius2: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+    slot: int,
+) -> int:
+    """Row i of a candidate list cut to its live entries closer than sqrt(radius2), in the
+    candidates' order; counted only when ``slot`` < 0, else written from ``slot`` on."""
+    xi = x[i]
+    yi = y[i]
+    zi = z[i]
+    found = 0
+    for m in range(candidates.start[i], candidates.start[i + 1]):
+        j = candidates.indices[m]
+        dx = x[j] - xi
+        dy = y[j] - yi
+        dz = z[j] - zi
+        r2 = dx * dx + dy * dy + dz * dz
+        if r2 < radius2 and alive[j]:
+            if slot >= 0:
+                index[slot + found] = j
+                distance[slot + found] = math.sqrt(r2)
+            found += 1
+    return found
+
+
+@njit(cache=True, parallel=True)
+def filter_neighbours(
+    candidates: Neighbours,
+    position: np.ndarray,
+    alive: np.ndarray,
+    rows: np.ndarray,
+    radius: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The neighbour list within ``radius`` (m) at ``position``, for the live particles with
+    ``rows[i]``, taken from a list of ``candidates`` built at other positions with a larger
+    radius (a Verlet list: it holds every pair now closer than ``radius`` while no particle
+    has moved more than half the difference of the radii since it was built). Within a row,
+    the candidates' order. Returns the arrays of :class:`Neighbours` in the buffers ``index``
+    and ``distance`` (or new ones), like :func:`search_neighbours`; coordinates per axis as in
+    :func:`_scan_cells`."""
+    n, dim = position.shape
+    coordinates = np.zeros((3, n))
+    for i in prange(n):
+        for k in range(dim):
+            coordinates[k, i] = position[i, k]
+    x = coordinates[0]
+    y = coordinates[1]
+    z = coordinates[2]
+    active = np.flatnonzero(alive & rows)
+    radius2 = radius * radius
+    row_count = np.zeros(n + 1, dtype=np.int64)
+    for a in prange(active.shape[0]):  # first pass: count each row
+        i = active[a]
+        row_count[i + 1] = _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, -1)
+    for i in range(n):
+        row_count[i + 1] += row_count[i]
+    index = room(index, int(row_count[n]))
+    distance = room(distance, int(row_count[n]))
+    for a in prange(active.shape[0]):  # second pass: fill each row
+        i = active[a]
+        _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, row_count[i])
+    return row_count, index, distance
+
+
+@njit(cache=True, parallel=True)
+def listed(neighbours: Neighbours, rows: np.ndarray) -> np.ndarray:
+    """(N,) bool: the particles that appear in the rows ``rows`` ((R,) int64) of
+    ``neighbours``. (Threads may store True into the same entry: the outcome is the same.)"""
+    out = np.zeros(neighbours.start.shape[0] - 1, dtype=np.bool_)
+    for a in prange(rows.shape[0]):
+        i = rows[a]
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            out[neighbours.indices[m]] = True
+    return out
+
+
+@njit(cache=True, parallel=True)
+def largest_displacement(position: np.ndarray, reference: np.ndarray, alive: np.ndarray) -> float:
+    """The largest distance (m) of a live particle from its ``reference`` position."""
+    n, dim = position.shape
+    largest = np.zeros(n)
+    for i in prange(n):
+        if alive[i]:
+            r2 = 0.0
+            for k in range(dim):
+                d = position[i, k] - reference[i, k]
+                r2 += d * d
+            largest[i] = r2
+    return math.sqrt(largest.max()) if n else 0.0
