@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jellysim.errors import SimulationUnstable
-from jellysim.fluid.mps import FluidDiverged, MPSSolver, substep
+from jellysim.fluid.mps import MPSSolver, substep
+from jellysim.fluid.solvers import FluidDiverged
 
 # Called before each step with (time, dt) in s: the external force density (N, D) N/m3, or None.
 ExternalForce = Callable[[float, float], "np.ndarray | None"]

@@ -728,10 +728,6 @@ def substep(remaining: float, limit: float) -> float:
 
 
 __all__ = [
-    "DUMMY",
-    "FLUID",
-    "WALL",
-    "FluidDiverged",
     "LatticeReference",
     "MPSParameters",
     "MPSSolver",
