@@ -10,6 +10,8 @@ import numpy as np
 import jellysim
 from regression.cases import CASES
 
+REFERENCE_FOLDER = Path(__file__).resolve().parent / "reference"
+
 # Root attributes that name the software, not the behaviour.
 IGNORED_ATTRIBUTES = {"version"}
 

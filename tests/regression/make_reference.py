@@ -16,17 +16,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: scenes.py
 
 from regression.cases import CASES  # noqa: E402
-from regression.compare import read_all, run_case  # noqa: E402
-
-HERE = Path(__file__).resolve().parent
+from regression.compare import REFERENCE_FOLDER, read_all, run_case  # noqa: E402
 
 
 def main(names: list[str]) -> None:
-    (HERE / "reference").mkdir(exist_ok=True)
+    REFERENCE_FOLDER.mkdir(exist_ok=True)
     for name in names or list(CASES):
         with tempfile.TemporaryDirectory() as folder:
             values = read_all(run_case(name, Path(folder)))
-        np.savez_compressed(HERE / "reference" / f"{name}.npz", **values)
+        np.savez_compressed(REFERENCE_FOLDER / f"{name}.npz", **values)
         print(f"{name}: {len(values)} arrays")
 
 

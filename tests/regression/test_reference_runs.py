@@ -13,14 +13,12 @@ import numpy as np
 import pytest
 
 from regression.cases import CASES
-from regression.compare import differences, read_all, run_case
-
-REFERENCE = Path(__file__).resolve().parent / "reference"
+from regression.compare import REFERENCE_FOLDER, differences, read_all, run_case
 
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_reference_run_is_bit_for_bit(name: str, tmp_path: Path) -> None:
-    with np.load(REFERENCE / f"{name}.npz") as stored:
+    with np.load(REFERENCE_FOLDER / f"{name}.npz") as stored:
         expected = dict(stored)
     actual = read_all(run_case(name, tmp_path))
     assert len(expected) > 0
