@@ -120,7 +120,7 @@ def test_accessors_read_what_h5py_reads(case: str, results: dict[str, Path]) -> 
     sizes: dict[str, int] = {}
     with jellysim.open_result(results[case]) as r, h5py.File(results[case], "r") as raw:
         frames = r.frames
-        assert frames == raw["time"].shape[0] == r.expected_frames >= 2
+        assert frames == raw[fields.TIME.path].shape[0] == r.expected_frames >= 2
         present = {field for field in fields.FIELDS if r.has(field)}
         assert present == WRITTEN[case]
         for field in present:
@@ -231,7 +231,7 @@ def test_rows_past_the_frames_written_are_not_read(
             ds = f[field.path]
             ds.resize(ds.shape[0] + 1, axis=0)
             ds[-1] = np.nan
-        frames = f["time"].shape[0]
+        frames = f[fields.TIME.path].shape[0]
     with jellysim.open_result(tmp_path) as r:
         assert r.frames == frames
         assert r.tentacle_positions.shape[0] == frames
