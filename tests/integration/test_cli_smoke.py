@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 
 QUICK = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
 # About 240 frames of some 1,600 substeps: a few seconds, long enough for the bar to update.
@@ -127,7 +128,7 @@ def test_run_writes_result_and_scene(ran: tuple[Path, subprocess.CompletedProces
         assert r.scene == expected
         assert np.all(np.isfinite(r.tentacle_positions))
     with h5py.File(folder / "result.h5", "r") as f:  # closed cleanly: any HDF5 reader opens it
-        assert f["time"].shape == (expected.frame_count,)
+        assert f[fields.TIME.path].shape == (expected.frame_count,)
 
 
 def test_plot_writes_nontrivial_pngs(ran: tuple[Path, subprocess.CompletedProcess[str]]) -> None:

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.export import export
 from jellysim.export import gltf as gltf_export
 from jellysim.interpolation import interpolate_result
@@ -153,13 +154,13 @@ def test_bell_and_tentacles_match_the_result(brown: jellysim.Result, exported: l
     count, particles = 12, 60  # 6 simulated tentacles x 2, 60 particles each
     assert drawn.shape[1:3] == (count, particles)
     radii = tentacle_radii(particles, scene_look(brown.scene))
-    faces = brown.file["bell/surface_faces"][:]
+    faces = brown.file[fields.BELL_SURFACE_FACES.path][:]
     for frame in (0, 2, brown.frames - 1):
         node = frames[frame]
         bell = glb.primitive(node, "bell")
         vertices = glb.array(bell.attributes.POSITION)
         np.testing.assert_allclose(
-            z_up(vertices), brown.file["bell/surface_vertices"][frame], atol=1e-6
+            z_up(vertices), brown.file[fields.BELL_SURFACE_VERTICES.path][frame], atol=1e-6
         )
         accessor = glb.doc.accessors[bell.attributes.POSITION]
         assert accessor.min == vertices.min(axis=0).tolist()
@@ -404,10 +405,10 @@ def test_fluid_particles_are_points(tmp_path: Path) -> None:
     alive[1, :4] = False
     alive[2, :] = False  # nothing left to draw at the last frame
     with h5py.File(folder / "result.h5", "w") as f:
-        f["time"] = np.array([0.0, 0.1, 0.2])
-        f["fluid/position"] = position
-        f["fluid/alive"] = alive
-        f["fluid/kind"] = np.zeros(20, dtype=np.int8)
+        f[fields.TIME.path] = np.array([0.0, 0.1, 0.2])
+        f[fields.FLUID_POSITION.path] = position
+        f[fields.FLUID_ALIVE.path] = alive
+        f[fields.FLUID_KIND.path] = np.zeros(20, dtype=np.int8)
         f.attrs["scene"] = 'name = "block"\n'
         f.attrs["fps"] = 10.0
         f.attrs["frames_expected"] = 3

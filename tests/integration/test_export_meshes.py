@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
 
@@ -37,11 +38,11 @@ def test_obj_sequence_holds_the_bell_and_every_drawn_tentacle(
     first = export(brown, "obj", tmp_path, every=2, interpolation=2)
     assert first == [tmp_path / "frame_00000.obj"]
     drawn = interpolate_result(brown, 2)
-    faces = brown.file["bell/surface_faces"][:]
+    faces = brown.file[fields.BELL_SURFACE_FACES.path][:]
     for frame in range(0, brown.frames, 2):
         path = tmp_path / f"frame_{frame:05d}.obj"
         mesh = meshio.read(path)  # the triangles
-        bell = brown.file["bell/surface_vertices"][frame]
+        bell = brown.file[fields.BELL_SURFACE_VERTICES.path][frame]
         np.testing.assert_array_equal(mesh.cells_dict["triangle"], faces)
         np.testing.assert_allclose(mesh.points[: len(bell)], bell, rtol=1e-6, atol=1e-9)
         vertices, lines = _obj_polylines(path)
@@ -54,9 +55,11 @@ def test_obj_sequence_holds_the_bell_and_every_drawn_tentacle(
 def test_ply_of_a_jellyfish_and_of_a_fluid(brown: jellysim.Result, tmp_path: Path) -> None:
     export(brown, "ply", tmp_path / "jelly", frames=(1, 2))
     mesh = meshio.read(tmp_path / "jelly" / "frame_00001.ply")
-    bell = brown.file["bell/surface_vertices"][1]
+    bell = brown.file[fields.BELL_SURFACE_VERTICES.path][1]
     np.testing.assert_allclose(mesh.points[: len(bell)], bell, rtol=1e-6)
-    np.testing.assert_array_equal(mesh.cells_dict["triangle"], brown.file["bell/surface_faces"][:])
+    np.testing.assert_array_equal(
+        mesh.cells_dict["triangle"], brown.file[fields.BELL_SURFACE_FACES.path][:]
+    )
     assert int(np.sum(mesh.point_data["part"] == 1)) == 6 * 10 * 60  # interpolation 10
 
     folder = tmp_path / "fluid"
@@ -65,12 +68,12 @@ def test_ply_of_a_jellyfish_and_of_a_fluid(brown: jellysim.Result, tmp_path: Pat
     alive = np.ones((2, 30), dtype=bool)
     alive[1, :4] = False
     with h5py.File(folder / "result.h5", "w") as f:
-        f["time"] = np.array([0.0, 0.1])
-        f["fluid/position"] = rng.uniform(0, 1, (2, 30, 2))
-        f["fluid/velocity"] = rng.normal(size=(2, 30, 2))
-        f["fluid/pressure"] = rng.uniform(0, 100, (2, 30))
-        f["fluid/alive"] = alive
-        f["fluid/kind"] = np.zeros(30, dtype=np.int8)
+        f[fields.TIME.path] = np.array([0.0, 0.1])
+        f[fields.FLUID_POSITION.path] = rng.uniform(0, 1, (2, 30, 2))
+        f[fields.FLUID_VELOCITY.path] = rng.normal(size=(2, 30, 2))
+        f[fields.FLUID_PRESSURE.path] = rng.uniform(0, 100, (2, 30))
+        f[fields.FLUID_ALIVE.path] = alive
+        f[fields.FLUID_KIND.path] = np.zeros(30, dtype=np.int8)
         f.attrs["scene"] = 'name = "b"\n'
         f.attrs["fps"] = 10.0
         f.attrs["frames_expected"] = 2
@@ -78,8 +81,12 @@ def test_ply_of_a_jellyfish_and_of_a_fluid(brown: jellysim.Result, tmp_path: Pat
         export(result, "ply", tmp_path / "fluid-ply")
         cloud = meshio.read(tmp_path / "fluid-ply" / "frame_00001.ply")
         assert cloud.points.shape == (26, 3)
-        np.testing.assert_allclose(cloud.points[:, :2], result.file["fluid/position"][1, 4:])
         np.testing.assert_allclose(
-            cloud.point_data["pressure"], result.file["fluid/pressure"][1, 4:]
+            cloud.points[:, :2], result.file[fields.FLUID_POSITION.path][1, 4:]
         )
-        np.testing.assert_allclose(cloud.point_data["vy"], result.file["fluid/velocity"][1, 4:, 1])
+        np.testing.assert_allclose(
+            cloud.point_data["pressure"], result.file[fields.FLUID_PRESSURE.path][1, 4:]
+        )
+        np.testing.assert_allclose(
+            cloud.point_data["vy"], result.file[fields.FLUID_VELOCITY.path][1, 4:, 1]
+        )

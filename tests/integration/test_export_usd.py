@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
 from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
@@ -41,7 +42,7 @@ def test_bell_and_tentacles_match_the_result(stage_and_result) -> None:
     stage, result = stage_and_result
     bell = UsdGeom.Mesh(stage.GetPrimAtPath("/Jellyfish/Bell"))
     curves = UsdGeom.BasisCurves(stage.GetPrimAtPath("/Jellyfish/Tentacles"))
-    faces = result.file["bell/surface_faces"][:]
+    faces = result.file[fields.BELL_SURFACE_FACES.path][:]
     np.testing.assert_array_equal(np.array(bell.GetFaceVertexIndicesAttr().Get()), faces.ravel())
     drawn = interpolate_result(result, 2)
     assert list(curves.GetCurveVertexCountsAttr().Get()) == [60] * 12
@@ -49,7 +50,9 @@ def test_bell_and_tentacles_match_the_result(stage_and_result) -> None:
     assert np.all(np.diff(widths, axis=1) < 0)  # tapered from root to tip
     for frame in (0, 2, result.frames - 1):
         points = np.array(bell.GetPointsAttr().Get(frame))
-        np.testing.assert_allclose(points, result.file["bell/surface_vertices"][frame], atol=1e-6)
+        np.testing.assert_allclose(
+            points, result.file[fields.BELL_SURFACE_VERTICES.path][frame], atol=1e-6
+        )
         low, high = np.array(bell.GetExtentAttr().Get(frame))
         np.testing.assert_allclose(low, points.min(axis=0))
         np.testing.assert_allclose(high, points.max(axis=0))
@@ -94,10 +97,10 @@ def test_fluid_particles_are_time_sampled_points(tmp_path: Path) -> None:
     alive[1, :3] = False
     position = rng.uniform(0, 1, (2, 20, 2))
     with h5py.File(folder / "result.h5", "w") as f:
-        f["time"] = np.array([0.0, 0.1])
-        f["fluid/position"] = position
-        f["fluid/alive"] = alive
-        f["fluid/kind"] = np.zeros(20, dtype=np.int8)
+        f[fields.TIME.path] = np.array([0.0, 0.1])
+        f[fields.FLUID_POSITION.path] = position
+        f[fields.FLUID_ALIVE.path] = alive
+        f[fields.FLUID_KIND.path] = np.zeros(20, dtype=np.int8)
         f.attrs["scene"] = 'name = "b"\n'
         f.attrs["fps"] = 10.0
         f.attrs["frames_expected"] = 2
@@ -183,7 +186,7 @@ def test_the_script_reads_the_stage_metadata(blender_export) -> None:
     low, high = np.array(settings["bounds_min"]), np.array(settings["bounds_max"])
     drawn = interpolate_result(result, 2)
     for frame in (1, 3):
-        bell = result.file["bell/surface_vertices"][frame]
+        bell = result.file[fields.BELL_SURFACE_VERTICES.path][frame]
         for points in (bell, drawn[frame].reshape(-1, 3)):
             assert np.all(points >= low - 1e-6) and np.all(points <= high + 1e-6)
         for prim in ("Bell", "Tentacles"):
@@ -194,7 +197,7 @@ def test_the_script_reads_the_stage_metadata(blender_export) -> None:
             )
             assert np.all(box[0] >= low - 1e-6) and np.all(box[1] <= high + 1e-6)
     tight = np.stack([drawn[[1, 3]].reshape(-1, 3).min(0), drawn[[1, 3]].reshape(-1, 3).max(0)])
-    bell = result.file["bell/surface_vertices"][[1, 3]].reshape(-1, 3)
+    bell = result.file[fields.BELL_SURFACE_VERTICES.path][[1, 3]].reshape(-1, 3)
     tight = np.stack([np.minimum(tight[0], bell.min(0)), np.maximum(tight[1], bell.max(0))])
     np.testing.assert_allclose(low, tight[0], atol=look.tentacle_radius + 1e-6)
     np.testing.assert_allclose(high, tight[1], atol=look.tentacle_radius + 1e-6)

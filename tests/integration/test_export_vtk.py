@@ -15,6 +15,7 @@ import pytest
 import scenes
 
 import jellysim
+from jellysim import fields
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
 
@@ -36,7 +37,7 @@ def test_tentacles_and_bell_round_trip(brown: jellysim.Result, tmp_path: Path) -
     frames = list(range(0, brown.frames, 2))
     np.testing.assert_allclose([t for t, _ in entries], brown.time[frames])
     drawn = interpolate_result(brown, 3)
-    faces = brown.file["bell/surface_faces"][:]
+    faces = brown.file[fields.BELL_SURFACE_FACES.path][:]
     for frame, (_, name) in zip(frames, entries, strict=True):
         mesh = meshio.read(tmp_path / name)
         np.testing.assert_allclose(mesh.points, drawn[frame].reshape(-1, 3), atol=1e-12)
@@ -44,7 +45,9 @@ def test_tentacles_and_bell_round_trip(brown: jellysim.Result, tmp_path: Path) -
         assert lines.shape == (18 * 59, 2)  # 6 x 3 drawn tentacles of 60 particles
         np.testing.assert_array_equal(np.unique(mesh.point_data["tentacle"]), np.arange(18))
         bell = meshio.read(tmp_path / f"bell_{frame:05d}.vtu")
-        np.testing.assert_allclose(bell.points, brown.file["bell/surface_vertices"][frame])
+        np.testing.assert_allclose(
+            bell.points, brown.file[fields.BELL_SURFACE_VERTICES.path][frame]
+        )
         np.testing.assert_array_equal(bell.cells_dict["triangle"], faces)
 
 
@@ -62,17 +65,19 @@ def test_mass_spring_bell_round_trip(tmp_path: Path) -> None:
         "bell.pvd", "bell_particles.pvd", "fluid.pvd", "tentacles.pvd",
     ]  # fmt: skip
     f = moon.file
-    pairs = f["bell/springs"][:]
-    muscle = f["bell/muscle"][:]
-    rest = f["bell/rest_position"][:]
+    pairs = f[fields.BELL_SPRINGS.path][:]
+    muscle = f[fields.BELL_MUSCLE.path][:]
+    rest = f[fields.BELL_REST_POSITION.path][:]
     assert 0 < muscle.sum() < len(pairs)
     entries = _pvd(out / "bell_particles.pvd")
     np.testing.assert_allclose([t for t, _ in entries], moon.time)
     for frame, (_, name) in enumerate(entries):
         particles = meshio.read(out / name)
-        np.testing.assert_allclose(particles.points, f["bell/position"][frame], atol=1e-12)
         np.testing.assert_allclose(
-            particles.point_data["velocity"], f["bell/velocity"][frame], atol=1e-12
+            particles.points, f[fields.BELL_POSITION.path][frame], atol=1e-12
+        )
+        np.testing.assert_allclose(
+            particles.point_data["velocity"], f[fields.BELL_VELOCITY.path][frame], atol=1e-12
         )
         np.testing.assert_array_equal(particles.cells_dict["line"], pairs)
         np.testing.assert_array_equal(particles.cell_data["muscle"][0], muscle.astype(int))
@@ -81,13 +86,17 @@ def test_mass_spring_bell_round_trip(tmp_path: Path) -> None:
             np.linalg.norm(rest[pairs[:, 1]] - rest[pairs[:, 0]], axis=1),
         )
         surface = meshio.read(out / f"bell_{frame:05d}.vtu")
-        np.testing.assert_allclose(surface.points, f["bell/surface_vertices"][frame], atol=1e-6)
+        np.testing.assert_allclose(
+            surface.points, f[fields.BELL_SURFACE_VERTICES.path][frame], atol=1e-6
+        )
         fluid = meshio.read(out / f"fluid_{frame:05d}.vtu")
-        alive = f["fluid/alive"][frame]
-        np.testing.assert_allclose(fluid.points, f["fluid/position"][frame][alive], atol=1e-6)
+        alive = f[fields.FLUID_ALIVE.path][frame]
+        np.testing.assert_allclose(
+            fluid.points, f[fields.FLUID_POSITION.path][frame][alive], atol=1e-6
+        )
     # The bell's particles are not among the fluid's.
-    assert f["fluid/position"].shape[1] == len(f["fluid/kind"][:])
-    first = f["fluid/position"][0].astype(float)
+    assert f[fields.FLUID_POSITION.path].shape[1] == len(f[fields.FLUID_KIND.path][:])
+    first = f[fields.FLUID_POSITION.path][0].astype(float)
     gap = np.min(np.linalg.norm(first[:, None, :] - rest[None, ::7, :], axis=2))
     assert gap > 0.1 * 0.25
 
@@ -101,13 +110,13 @@ def test_fluid_particles_round_trip(tmp_path: Path) -> None:
     alive = np.ones((frames, count), dtype=bool)
     alive[2, :5] = False
     with h5py.File(folder / "result.h5", "w") as f:
-        f["time"] = np.arange(frames) * 0.1
-        f["fluid/position"] = position
-        f["fluid/velocity"] = rng.normal(size=(frames, count, 2))
-        f["fluid/pressure"] = rng.uniform(0, 1e3, (frames, count))
-        f["fluid/number_density"] = rng.uniform(5, 7, (frames, count))
-        f["fluid/alive"] = alive
-        f["fluid/kind"] = (np.arange(count) % 3).astype(np.int8)
+        f[fields.TIME.path] = np.arange(frames) * 0.1
+        f[fields.FLUID_POSITION.path] = position
+        f[fields.FLUID_VELOCITY.path] = rng.normal(size=(frames, count, 2))
+        f[fields.FLUID_PRESSURE.path] = rng.uniform(0, 1e3, (frames, count))
+        f[fields.FLUID_NUMBER_DENSITY.path] = rng.uniform(5, 7, (frames, count))
+        f[fields.FLUID_ALIVE.path] = alive
+        f[fields.FLUID_KIND.path] = (np.arange(count) % 3).astype(np.int8)
         f.attrs["scene"] = 'name = "block"\n'
         f.attrs["fps"] = 10.0
         f.attrs["frames_expected"] = frames
@@ -119,12 +128,16 @@ def test_fluid_particles_round_trip(tmp_path: Path) -> None:
     np.testing.assert_allclose(last.points[:, :2], position[2, 5:])
     np.testing.assert_array_equal(last.point_data["particle"], np.arange(5, 50))
     with h5py.File(folder / "result.h5") as f:
-        np.testing.assert_allclose(last.point_data["pressure"], f["fluid/pressure"][2, 5:])
-        np.testing.assert_allclose(last.point_data["velocity"][:, :2], f["fluid/velocity"][2, 5:])
         np.testing.assert_allclose(
-            last.point_data["number_density"], f["fluid/number_density"][2, 5:]
+            last.point_data["pressure"], f[fields.FLUID_PRESSURE.path][2, 5:]
         )
-        np.testing.assert_array_equal(last.point_data["kind"], f["fluid/kind"][5:])
+        np.testing.assert_allclose(
+            last.point_data["velocity"][:, :2], f[fields.FLUID_VELOCITY.path][2, 5:]
+        )
+        np.testing.assert_allclose(
+            last.point_data["number_density"], f[fields.FLUID_NUMBER_DENSITY.path][2, 5:]
+        )
+        np.testing.assert_array_equal(last.point_data["kind"], f[fields.FLUID_KIND.path][5:])
 
 
 @pytest.mark.parametrize(

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.fluid.geometry import FLUID
 from jellysim.reference import front_errors, surge_front
 
@@ -41,16 +42,16 @@ def test_fluid_datasets_and_attributes(dam: Path) -> None:
         f = r.file
         frames = r.frames
         assert frames == r.expected_frames == round(0.25 * 200) + 1
-        n = f["fluid/kind"].shape[0]
-        fluid = int(np.sum(f["fluid/kind"][:] == FLUID))
+        n = f[fields.FLUID_KIND.path].shape[0]
+        fluid = int(np.sum(f[fields.FLUID_KIND.path][:] == FLUID))
         assert fluid == 20 * 46 == f.attrs["fluid_particles"]  # 46 rows of sqrt(3)/2 l0
         for name, shape, units in [
-            ("fluid/position", (frames, n, 2), "m"),
-            ("fluid/velocity", (frames, n, 2), "m/s"),
-            ("fluid/pressure", (frames, n), "Pa"),
-            ("fluid/number_density", (frames, n), "1"),
-            ("fluid/alive", (frames, n), "1"),
-            ("solver/iterations", (frames,), "1"),
+            (fields.FLUID_POSITION.path, (frames, n, 2), "m"),
+            (fields.FLUID_VELOCITY.path, (frames, n, 2), "m/s"),
+            (fields.FLUID_PRESSURE.path, (frames, n), "Pa"),
+            (fields.FLUID_NUMBER_DENSITY.path, (frames, n), "1"),
+            (fields.FLUID_ALIVE.path, (frames, n), "1"),
+            (fields.SOLVER_ITERATIONS.path, (frames,), "1"),
         ]:
             assert f[name].shape == shape, name
             assert f[name].attrs["units"] == units, name
@@ -58,11 +59,11 @@ def test_fluid_datasets_and_attributes(dam: Path) -> None:
         assert f.attrs["column_height"] == pytest.approx(46 * 0.005 * np.sqrt(3) / 2)
         assert f.attrs["particle_spacing"] == 0.005
         # The DESIGN §3 geometry: left inner wall at x = 0, floor at y = 0.
-        start = f["fluid/position"][0][f["fluid/kind"][:] == FLUID]
+        start = f[fields.FLUID_POSITION.path][0][f[fields.FLUID_KIND.path][:] == FLUID]
         assert start[:, 0].min() > 0.0 and start[:, 1].min() > 0.0
         assert start[:, 0].max() < 0.1 and start[:, 1].max() < 0.2
-        assert np.all(f["solver/iterations"][1:] > 0)
-        assert np.all(np.isfinite(f["fluid/position"][:]))
+        assert np.all(f[fields.SOLVER_ITERATIONS.path][1:] > 0)
+        assert np.all(np.isfinite(f[fields.FLUID_POSITION.path][:]))
 
 
 def test_dam_break_front_follows_martin_and_moyce(dam: Path) -> None:
@@ -72,7 +73,10 @@ def test_dam_break_front_follows_martin_and_moyce(dam: Path) -> None:
         f = r.file
         a = f.attrs["column_width"]
         front = surge_front(
-            f["fluid/position"][:], f["fluid/alive"][:], f["fluid/kind"][:] == FLUID, a
+            f[fields.FLUID_POSITION.path][:],
+            f[fields.FLUID_ALIVE.path][:],
+            f[fields.FLUID_KIND.path][:] == FLUID,
+            a,
         )
         raw, shifted, shift = front_errors(r.time * np.sqrt(2 * 9.81 / a), front)
     print(f"dam break 20/a: raw {raw:.3f}, shifted {shifted:.3f} by {shift:+.2f}")
@@ -102,8 +106,14 @@ def test_a_resumed_fluid_run_is_bitwise_identical(tmp_path: Path) -> None:
     resumed = jellysim.run("dam-break-2d", tmp_path / "cut", overrides=overrides, resume=True)
     with whole, resumed:
         assert resumed.frames == whole.frames
-        for name in ("time", "fluid/position", "fluid/velocity", "fluid/pressure", "fluid/alive"):
-            np.testing.assert_array_equal(resumed.file[name][:], whole.file[name][:], name)
+        for field in (
+            fields.TIME,
+            fields.FLUID_POSITION,
+            fields.FLUID_VELOCITY,
+            fields.FLUID_PRESSURE,
+            fields.FLUID_ALIVE,
+        ):
+            np.testing.assert_array_equal(resumed.read(field), whole.read(field), field.path)
 
 
 def test_a_diverging_pressure_solve_exits_3_with_a_diagnosis(tmp_path: Path) -> None:
@@ -212,8 +222,11 @@ def test_hydrostatic_3d_preset_runs_and_plots(tmp_path: Path) -> None:
         profile = hydrostatic_profile(result)
         depth = float(result.file.attrs["water_depth"])
         assert int(result.file.attrs["fluid_particles"]) == 2800
-        assert result.file["fluid/position"].shape[1:] == (len(result.file["fluid/kind"]), 3)
-        assert np.all(result.file["fluid/alive"][-1])
+        assert result.file[fields.FLUID_POSITION.path].shape[1:] == (
+            len(result.file[fields.FLUID_KIND.path]),
+            3,
+        )
+        assert np.all(result.file[fields.FLUID_ALIVE.path][-1])
     assert depth == pytest.approx(12 * (2.0 / 3.0) ** 0.5 * 0.005)
     assert profile.slope == pytest.approx(1.0, rel=0.03)
     assert profile.head == pytest.approx(depth - 0.5 * (2.0 / 3.0) ** 0.5 * 0.005, rel=0.02)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.bell import make_root_driver
 from jellysim.io.plots import jetting_and_relaxation, phase_frames
 
@@ -23,16 +24,26 @@ def test_bell_datasets_have_the_design_shapes_and_units(brown: jellysim.Result) 
     f = brown.file
     frames = brown.frames
     driver = make_root_driver(brown.scene)
-    vertices = f["bell/surface_vertices"]
+    vertices = f[fields.BELL_SURFACE_VERTICES.path]
     assert vertices.shape == (frames, driver.surface(0.0).shape[0], 3)
-    assert f["bell/surface_faces"].shape == (driver.faces.shape[0], 3)
-    assert f["bell/surface_faces"].dtype.kind == "i"
-    assert int(f["bell/surface_faces"][:].max()) == vertices.shape[1] - 1
-    assert f["bell/position"].id == vertices.id  # the same data, stored once (a hard link)
-    assert f["bell/margin"].shape == (frames, driver.sectors, 3)
-    assert f["bell/centre"].shape == (frames, 3) and f["bell/contraction"].shape == (frames,)
-    for name in ("surface_vertices", "surface_faces", "margin", "centre", "contraction", "rim"):
-        assert "units" in f["bell"][name].attrs, name
+    assert f[fields.BELL_SURFACE_FACES.path].shape == (driver.faces.shape[0], 3)
+    assert f[fields.BELL_SURFACE_FACES.path].dtype.kind == "i"
+    assert int(f[fields.BELL_SURFACE_FACES.path][:].max()) == vertices.shape[1] - 1
+    assert (
+        f[fields.BELL_POSITION.path].id == vertices.id
+    )  # the same data, stored once (a hard link)
+    assert f[fields.BELL_MARGIN.path].shape == (frames, driver.sectors, 3)
+    assert f[fields.BELL_CENTRE.path].shape == (frames, 3)
+    assert f[fields.BELL_CONTRACTION.path].shape == (frames,)
+    for field in (
+        fields.BELL_SURFACE_VERTICES,
+        fields.BELL_SURFACE_FACES,
+        fields.BELL_MARGIN,
+        fields.BELL_CENTRE,
+        fields.BELL_CONTRACTION,
+        fields.BELL_RIM,
+    ):
+        assert f[field.path].attrs["units"] == field.units, field.path
     assert f.attrs["bell_model"] == "kinematic"
 
 
@@ -41,19 +52,21 @@ def test_stored_bell_is_the_bells_shape_at_each_frame(brown: jellysim.Result) ->
     time = brown.time
     for frame in (0, 9, 31, len(time) - 1):
         np.testing.assert_allclose(
-            brown.file["bell/surface_vertices"][frame], driver.surface(time[frame]), atol=1e-6
+            brown.file[fields.BELL_SURFACE_VERTICES.path][frame],
+            driver.surface(time[frame]),
+            atol=1e-6,
         )
         np.testing.assert_allclose(brown.margin[frame], driver.margin(time[frame]), atol=1e-15)
     q, _, z, _ = driver.motion(time)
-    np.testing.assert_allclose(brown.file["bell/contraction"][:], q, atol=1e-15)
-    np.testing.assert_allclose(brown.file["bell/centre"][:, 2], z, atol=1e-15)
+    np.testing.assert_allclose(brown.file[fields.BELL_CONTRACTION.path][:], q, atol=1e-15)
+    np.testing.assert_allclose(brown.file[fields.BELL_CENTRE.path][:, 2], z, atol=1e-15)
 
 
 def test_roots_ride_the_pulsing_swimming_margin(brown: jellysim.Result) -> None:
     positions, rim = brown.tentacle_positions, brown.rim
     np.testing.assert_allclose(positions[:, :, 0], rim, atol=1e-12)
     # The bell swam its mean speed for the whole run (three whole cycles).
-    centre = brown.file["bell/centre"][:, 2]
+    centre = brown.file[fields.BELL_CENTRE.path][:, 2]
     assert centre[-1] - centre[0] == pytest.approx(0.3 * 3.0, rel=1e-9)
     # The tentacles came along, trailing behind the margin.
     tips = positions[:, :, -1, 2] - centre[:, None]
@@ -91,13 +104,13 @@ def test_a_bell_without_contraction_holds_still_and_its_tentacles_hang(tmp_path:
     spacing = result.scene.tentacles.spacing
     hanging = np.broadcast_to(-spacing * np.arange(positions.shape[2]), positions.shape[1:3])
     np.testing.assert_allclose(positions[-1, :, :, 2], hanging, atol=1e-9)
-    vertices = result.file["bell/surface_vertices"][:]
+    vertices = result.file[fields.BELL_SURFACE_VERTICES.path][:]
     np.testing.assert_array_equal(vertices, np.broadcast_to(vertices[:1], vertices.shape))
 
 
 def test_fig9_picks_full_contraction_and_late_relaxation(brown: jellysim.Result) -> None:
     jetting, relaxing = phase_frames(brown)
-    contraction = brown.file["bell/contraction"][:]
+    contraction = brown.file[fields.BELL_CONTRACTION.path][:]
     assert contraction[jetting] == pytest.approx(brown.scene.bell.contraction, rel=0.01)
     assert contraction[relaxing] < 0.01 * brown.scene.bell.contraction
     assert brown.time[jetting] >= brown.time[-1] - brown.scene.bell.period - 1e-9  # last cycle

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.render import povray
 from jellysim.render.pipeline import make_members, render
 from jellysim.render.video import probe
@@ -63,9 +64,9 @@ def _fluid_result(folder: Path, dead: int) -> Path:
     alive = np.ones((frames, side * side), dtype=bool)
     alive[:, :dead] = False
     with h5py.File(folder / "result.h5", "w") as f:
-        f["time"] = np.arange(frames) / 10.0
-        f["fluid/position"] = positions
-        f["fluid/alive"] = alive
+        f[fields.TIME.path] = np.arange(frames) / 10.0
+        f[fields.FLUID_POSITION.path] = positions
+        f[fields.FLUID_ALIVE.path] = alive
         f.attrs["scene"] = 'name = "block"\nfps = 10.0\nduration = 0.3\n'
         f.attrs["fps"] = 10.0
         f.attrs["frames_expected"] = frames
@@ -114,8 +115,8 @@ def test_fluid_around_a_jellyfish_is_left_out_unless_asked(
     frames, count = brown.frames, 40
     rng = np.random.default_rng(1)
     with h5py.File(folder / "result.h5", "a") as f:
-        f["fluid/position"] = rng.uniform(-3.0, 3.0, (frames, count, 3))
-        f["fluid/alive"] = np.ones((frames, count), dtype=bool)
+        f[fields.FLUID_POSITION.path] = rng.uniform(-3.0, 3.0, (frames, count, 3))
+        f[fields.FLUID_ALIVE.path] = np.ones((frames, count), dtype=bool)
     spheres = {}
     with jellysim.open_result(folder) as result:
         for mode in ("auto", "spheres", "none"):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 
 # Short runs of the forced-tentacles preset (bell.model = "none", forced radial roots).
 BASE = {
@@ -23,20 +24,20 @@ BASE = {
 
 # DESIGN §3: per-frame datasets, their trailing shape (names stand for sizes) and units.
 PER_FRAME = {
-    "time": ((), "s"),
-    "tentacles/position": (("T", "P", 3), "m"),
-    "tentacles/velocity": (("T", "P", 3), "m/s"),
-    "bell/rim": (("T", 3), "m"),
-    "bell/rim_velocity": (("T", 3), "m/s"),
-    "bell/margin": (("R", 3), "m"),
-    "bell/position": (("B", 3), "m"),
-    "bell/surface_vertices": (("V", 3), "m"),
-    "fluid/position": (("N", "D"), "m"),
-    "fluid/velocity": (("N", "D"), "m/s"),
-    "fluid/pressure": (("N",), "Pa"),
-    "fluid/number_density": (("N",), None),
-    "fluid/alive": (("N",), None),
-    "solver/iterations": ((), None),
+    fields.TIME.path: ((), "s"),
+    fields.TENTACLE_POSITION.path: (("T", "P", 3), "m"),
+    fields.TENTACLE_VELOCITY.path: (("T", "P", 3), "m/s"),
+    fields.BELL_RIM.path: (("T", 3), "m"),
+    fields.BELL_RIM_VELOCITY.path: (("T", 3), "m/s"),
+    fields.BELL_MARGIN.path: (("R", 3), "m"),
+    fields.BELL_POSITION.path: (("B", 3), "m"),
+    fields.BELL_SURFACE_VERTICES.path: (("V", 3), "m"),
+    fields.FLUID_POSITION.path: (("N", "D"), "m"),
+    fields.FLUID_VELOCITY.path: (("N", "D"), "m/s"),
+    fields.FLUID_PRESSURE.path: (("N",), "Pa"),
+    fields.FLUID_NUMBER_DENSITY.path: (("N",), None),
+    fields.FLUID_ALIVE.path: (("N",), None),
+    fields.SOLVER_ITERATIONS.path: ((), None),
 }
 
 
@@ -71,20 +72,20 @@ def test_per_frame_datasets_have_the_design_shapes(brown: tuple[jellysim.Scene, 
     with jellysim.open_result(folder) as r:
         f = r.file
         for name in (
-            "time",
-            "tentacles/position",
-            "tentacles/velocity",
-            "bell/rim",
-            "bell/rim_velocity",
-            "bell/margin",
+            fields.TIME.path,
+            fields.TENTACLE_POSITION.path,
+            fields.TENTACLE_VELOCITY.path,
+            fields.BELL_RIM.path,
+            fields.BELL_RIM_VELOCITY.path,
+            fields.BELL_MARGIN.path,
         ):
             assert name in f, f"{name} missing from result.h5"
-        assert f["time"].shape == (frames,)
-        assert f["tentacles/position"].shape == (frames, t.count, t.particles, 3)
-        assert f["tentacles/velocity"].shape == (frames, t.count, t.particles, 3)
-        assert f["bell/rim"].shape == (frames, t.count, 3)
-        assert f["bell/rim_velocity"].shape == (frames, t.count, 3)
-        margin = f["bell/margin"]
+        assert f[fields.TIME.path].shape == (frames,)
+        assert f[fields.TENTACLE_POSITION.path].shape == (frames, t.count, t.particles, 3)
+        assert f[fields.TENTACLE_VELOCITY.path].shape == (frames, t.count, t.particles, 3)
+        assert f[fields.BELL_RIM.path].shape == (frames, t.count, 3)
+        assert f[fields.BELL_RIM_VELOCITY.path].shape == (frames, t.count, 3)
+        margin = f[fields.BELL_MARGIN.path]
         assert margin.ndim == 3 and margin.shape[0] == frames and margin.shape[2] == 3
         assert margin.shape[1] >= t.count
         sizes = {"T": t.count, "P": t.particles}
@@ -97,12 +98,12 @@ def test_per_frame_datasets_have_the_design_shapes(brown: tuple[jellysim.Scene, 
             for size, want in zip(shape[1:], trailing, strict=True):
                 expected = sizes.setdefault(want, size) if isinstance(want, str) else want
                 assert size == expected, f"{name}: shape {shape}, expected {trailing}"
-        if "bell/surface_faces" in f:
-            faces = f["bell/surface_faces"][()]
+        if fields.BELL_SURFACE_FACES.path in f:
+            faces = f[fields.BELL_SURFACE_FACES.path][()]
             assert faces.ndim == 2 and faces.shape[1] == 3
-            if "bell/surface_vertices" in f:
+            if fields.BELL_SURFACE_VERTICES.path in f:
                 assert faces.min() >= 0
-                assert faces.max() < f["bell/surface_vertices"].shape[1]
+                assert faces.max() < f[fields.BELL_SURFACE_VERTICES.path].shape[1]
 
 
 def test_every_dataset_carries_its_units(brown: tuple[jellysim.Scene, Path]) -> None:
@@ -241,8 +242,8 @@ def test_seed_changes_the_noisy_flow_only(tmp_path: Path) -> None:
     noisy = {"flow.noise": 0.05}
     _run(tmp_path / "s1", {**noisy, "seed": 1})
     _run(tmp_path / "s2", {**noisy, "seed": 2})
-    one = _tentacle_data(tmp_path / "s1")["tentacles/position"]
-    two = _tentacle_data(tmp_path / "s2")["tentacles/position"]
+    one = _tentacle_data(tmp_path / "s1")[fields.TENTACLE_POSITION.path]
+    two = _tentacle_data(tmp_path / "s2")[fields.TENTACLE_POSITION.path]
     assert np.array_equal(one[0], two[0])  # the initial state does not depend on the seed
     assert not np.array_equal(one, two)
     assert np.abs(one - two).max() > 1e-6
@@ -250,6 +251,6 @@ def test_seed_changes_the_noisy_flow_only(tmp_path: Path) -> None:
     # Without noise the seed draws nothing: the tentacles move identically.
     _run(tmp_path / "q1", {"flow.noise": 0.0, "seed": 1})
     _run(tmp_path / "q2", {"flow.noise": 0.0, "seed": 2})
-    quiet1 = _tentacle_data(tmp_path / "q1")["tentacles/position"]
-    quiet2 = _tentacle_data(tmp_path / "q2")["tentacles/position"]
+    quiet1 = _tentacle_data(tmp_path / "q1")[fields.TENTACLE_POSITION.path]
+    quiet2 = _tentacle_data(tmp_path / "q2")[fields.TENTACLE_POSITION.path]
     assert np.array_equal(quiet1, quiet2)

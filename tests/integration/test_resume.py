@@ -16,6 +16,7 @@ import pytest
 import scenes
 
 import jellysim
+from jellysim import fields
 
 DURATION = 10.0
 FPS = 30.0
@@ -161,7 +162,12 @@ def test_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> None:
         assert r.expected_frames == FRAMES
         assert not r.complete
         np.testing.assert_allclose(r.time, np.arange(frames) / FPS, rtol=1e-12)
-        for name in ("tentacles/position", "tentacles/velocity", "bell/rim", "bell/margin"):
+        for name in (
+            fields.TENTACLE_POSITION.path,
+            fields.TENTACLE_VELOCITY.path,
+            fields.BELL_RIM.path,
+            fields.BELL_MARGIN.path,
+        ):
             # ``time`` is extended last in each batch: the other datasets are at least as long.
             assert r.file[name].shape[0] >= frames
             data = r.file[name][:frames]
@@ -218,9 +224,12 @@ def test_soft_bell_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> 
     assert done.returncode == 0, done.stderr
     _assert_same_result(killed, reference)
     found = _datasets(reference)
-    assert {"bell/position", "bell/surface_vertices", "fluid/position", "tentacles/position"} <= (
-        found.keys()
-    )
+    assert {
+        fields.BELL_POSITION.path,
+        fields.BELL_SURFACE_VERTICES.path,
+        fields.FLUID_POSITION.path,
+        fields.TENTACLE_POSITION.path,
+    } <= (found.keys())
 
 
 def test_resume_of_a_finished_run_changes_nothing(tmp_path: Path) -> None:

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.cli.main import main
 from jellysim.errors import InputError
 from jellysim.interpolation import interpolate_result
@@ -61,10 +62,10 @@ def fluid(tmp_path_factory: pytest.TempPathFactory) -> Path:
     kind = np.zeros(FLUID_PARTICLES, dtype=np.int8)
     kind[-12:] = 1  # a row of wall particles
     with h5py.File(folder / "result.h5", "w") as f:
-        f["time"] = np.arange(FLUID_FRAMES) / 10.0
-        f["fluid/position"] = position
-        f["fluid/alive"] = alive
-        f["fluid/kind"] = kind
+        f[fields.TIME.path] = np.arange(FLUID_FRAMES) / 10.0
+        f[fields.FLUID_POSITION.path] = position
+        f[fields.FLUID_ALIVE.path] = alive
+        f[fields.FLUID_KIND.path] = kind
         f.attrs["scene"] = 'name = "block"\nfps = 10.0\nduration = 0.9\n'
         f.attrs["fps"] = 10.0
         f.attrs["frames_expected"] = FLUID_FRAMES
@@ -143,15 +144,15 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -
     scene = brown.scene
     assert meta["name"] == "brown-jelly"
     assert meta["fps"] == 20.0 and meta["frames"] == brown.frames == 13 and meta["complete"]
-    np.testing.assert_array_equal(meta["time"], brown.time)
+    np.testing.assert_array_equal(meta[fields.TIME.path], brown.time)
     look = scene_look(scene)
     assert meta["look"]["bell_color"] == list(look.bell_color)
     assert meta["look"]["tentacle_color"] == list(look.tentacle_color)
     assert meta["look"]["bell_transparency"] == look.bell_transparency
     assert meta["bell"] == {
         "present": True,
-        "vertices": f["bell/surface_vertices"].shape[1],
-        "faces": f["bell/surface_faces"].shape[0],
+        "vertices": f[fields.BELL_SURFACE_VERTICES.path].shape[1],
+        "faces": f[fields.BELL_SURFACE_FACES.path].shape[0],
     }
     assert meta["tentacles"] == {
         "present": True,
@@ -163,7 +164,10 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -
     assert meta["fluid"]["present"] is False
     low, high = np.array(meta["bounds"])
     points = np.concatenate(
-        [f["bell/surface_vertices"][:].reshape(-1, 3), brown.tentacle_positions.reshape(-1, 3)]
+        [
+            f[fields.BELL_SURFACE_VERTICES.path][:].reshape(-1, 3),
+            brown.tentacle_positions.reshape(-1, 3),
+        ]
     )
     np.testing.assert_allclose(low, points.min(axis=0))
     np.testing.assert_allclose(high, points.max(axis=0))
@@ -174,13 +178,17 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -
 def test_bell_faces_and_vertices_match_the_result(brown: jellysim.Result, brown_url: str) -> None:
     f = brown.file
     faces = np.frombuffer(get(brown_url + "bell-faces"), dtype="<u4").reshape(-1, 3)
-    np.testing.assert_array_equal(faces, f["bell/surface_faces"][:])
-    vertices = f["bell/surface_vertices"].shape[1]
+    np.testing.assert_array_equal(faces, f[fields.BELL_SURFACE_FACES.path][:])
+    vertices = f[fields.BELL_SURFACE_VERTICES.path].shape[1]
     chunk = floats(get(brown_url + "frames?part=bell&start=3&count=5"), 5, vertices, 3)
-    np.testing.assert_allclose(chunk, f["bell/surface_vertices"][3:8], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(
+        chunk, f[fields.BELL_SURFACE_VERTICES.path][3:8], rtol=1e-6, atol=1e-7
+    )
     # A chunk reaching past the end stops at the last frame.
     tail = floats(get(brown_url + "frames?part=bell&start=10&count=16"), 3, vertices, 3)
-    np.testing.assert_allclose(tail, f["bell/surface_vertices"][10:], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(
+        tail, f[fields.BELL_SURFACE_VERTICES.path][10:], rtol=1e-6, atol=1e-7
+    )
 
 
 @pytest.mark.parametrize("factor", [None, 1, 4])
@@ -213,7 +221,7 @@ def test_fluid_chunks_are_world_points_with_dead_particles_nan(fluid: Path, flui
     assert kinds.tolist() == [0] * (FLUID_PARTICLES - 12) + [1] * 12
     chunk = floats(get(fluid_url + "frames?part=fluid&start=2&count=4"), 4, FLUID_PARTICLES, 3)
     with h5py.File(fluid / "result.h5", "r") as f:
-        position, alive = f["fluid/position"][2:6], f["fluid/alive"][2:6]
+        position, alive = f[fields.FLUID_POSITION.path][2:6], f[fields.FLUID_ALIVE.path][2:6]
     assert np.all(np.isnan(chunk[~alive])) and not np.any(np.isnan(chunk[alive]))
     np.testing.assert_allclose(chunk[alive][:, [0, 2]], position[alive], atol=1e-6)  # (x, 0, y)
     assert np.all(chunk[alive][:, 1] == 0.0)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 
 OVERRIDES = {"duration": 1.0, "fps": 30.0, "tentacles.count": 3, "tentacles.particles": 20}
 BROKEN = 1  # the tentacle whose state is corrupted
@@ -29,7 +30,12 @@ def _assert_clean_frames(folder: Path, clean: int) -> int:
         frames = r.frames
         assert clean + 1 <= frames < r.expected_frames
         np.testing.assert_allclose(r.time, np.arange(frames) / OVERRIDES["fps"], rtol=1e-12)
-        for name in ("tentacles/position", "tentacles/velocity", "bell/rim", "bell/margin"):
+        for name in (
+            fields.TENTACLE_POSITION.path,
+            fields.TENTACLE_VELOCITY.path,
+            fields.BELL_RIM.path,
+            fields.BELL_MARGIN.path,
+        ):
             data = r.file[name][: clean + 1]
             assert np.all(np.isfinite(data)), f"{name} is not finite in frames 0..{clean}"
         positions = r.tentacle_positions[: clean + 1]

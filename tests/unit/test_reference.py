@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.io.plots import plot_result
 from jellysim.reference import front_errors, martin_moyce, surge_front
 
@@ -59,10 +60,10 @@ def test_the_surge_front_figure_of_a_fluid_result(tmp_path: Path):
     positions[:, 0, 0] = front * a  # the front particle on the floor
     positions[:, 1] = [0.01, 0.15]  # one high in the column
     with h5py.File(tmp_path / "result.h5", "w") as f:
-        f["time"] = times
-        f["fluid/position"] = positions
-        f["fluid/alive"] = np.ones((times.size, 2), dtype=bool)
-        f["fluid/kind"] = np.zeros(2, dtype=np.int8)
+        f[fields.TIME.path] = times
+        f[fields.FLUID_POSITION.path] = positions
+        f[fields.FLUID_ALIVE.path] = np.ones((times.size, 2), dtype=bool)
+        f[fields.FLUID_KIND.path] = np.zeros(2, dtype=np.int8)
         f.attrs["scene"] = 'name = "dam"\n[water]\ngravity = [0.0, -9.81, 0.0]\n'
         f.attrs["column_width"] = a
         f.attrs["fps"] = 10.0

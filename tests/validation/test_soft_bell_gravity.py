@@ -26,6 +26,7 @@ import pytest
 import scenes
 
 import jellysim
+from jellysim import fields
 from jellysim.bell.swimming import swim_cycles
 
 PERIOD = scenes.SWIM_PERIOD
@@ -40,16 +41,16 @@ def _run(folder: Path, overrides: dict[str, object]) -> dict[str, np.ndarray]:
         assert result.complete
         time = np.asarray(result.time)
         frames = len(time)
-        fluid = np.asarray(result.file["fluid/kind"][:]) == 0
-        water = result.file["fluid/position"]
+        fluid = result.fluid_kind == 0
+        water = result.read(fields.FLUID_POSITION, [0, frames - 1])
         return {
             "time": time,
-            "centre": np.asarray(result.file["bell/centre"][:frames]),
-            "contraction": np.asarray(result.file["bell/contraction"][:frames]),
-            "bell": np.asarray(result.file["bell/position"][:frames]),
-            "water_height": np.array([water[k][fluid, 2].mean() for k in (0, frames - 1)]),
-            "alive": np.asarray(result.file["fluid/alive"][frames - 1]),
-            "steps": np.asarray(result.file["solver/steps"][1:frames]),
+            "centre": result.bell_centre,
+            "contraction": result.bell_contraction,
+            "bell": result.bell_positions,
+            "water_height": water[:, fluid, 2].mean(axis=1),
+            "alive": result.read(fields.FLUID_ALIVE, -1),
+            "steps": result.solver_steps[1:],
         }
 
 

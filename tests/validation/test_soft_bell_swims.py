@@ -39,8 +39,8 @@ def _swim(folder: Path, overrides: dict[str, object]) -> tuple[np.ndarray, ...]:
         assert r.complete
         return (
             r.time,
-            np.asarray(r.file["bell/centre"][:, 2]),
-            np.asarray(r.file["bell/contraction"][:]),
+            r.bell_centre[:, 2],
+            r.bell_contraction,
         )
 
 

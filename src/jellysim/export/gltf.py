@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.errors import JellysimError
 from jellysim.io.result import Result
 from jellysim.render.frame import FLUID_COLOR
@@ -262,29 +263,28 @@ def _read(result: Result, interpolation: int | None) -> _Source:
     from jellysim.render.frame import tentacle_radii
     from jellysim.render.pipeline import scene_look
 
-    f = result.file
     scene = result.scene
     look = scene_look(scene)
     tentacles = radii = None
-    if "tentacles/position" in f:
+    if result.has(fields.TENTACLE_POSITION):
         from jellysim.interpolation import interpolate_result
 
         tentacles = interpolate_result(result, interpolation)
         radii = tentacle_radii(tentacles.shape[2], look)
-    has_bell = "bell/surface_vertices" in f and "bell/surface_faces" in f
-    fluid = f["fluid/position"] if "fluid/position" in f else None
+    has_bell = result.has(fields.BELL_SURFACE_VERTICES) and result.has(fields.BELL_SURFACE_FACES)
+    fluid = result.dataset(fields.FLUID_POSITION) if result.has(fields.FLUID_POSITION) else None
     alive = None
     if fluid is not None:
         alive = (
-            np.asarray(f["fluid/alive"][:], dtype=bool)
-            if "fluid/alive" in f
-            else np.ones(fluid.shape[:2], dtype=bool)
+            result.fluid_alive
+            if result.has(fields.FLUID_ALIVE)
+            else np.ones((result.frames, fluid.shape[1]), dtype=bool)
         )
     return _Source(
-        fps=float(f.attrs["fps"]),
+        fps=float(result.file.attrs["fps"]),
         name=scene.name,
-        bell_vertices=f["bell/surface_vertices"] if has_bell else None,
-        bell_faces=np.asarray(f["bell/surface_faces"][:], dtype=np.int64) if has_bell else None,
+        bell_vertices=result.dataset(fields.BELL_SURFACE_VERTICES) if has_bell else None,
+        bell_faces=result.bell_surface_faces.astype(np.int64) if has_bell else None,
         tentacles=tentacles,
         radii=radii,
         fluid_position=fluid,

@@ -14,11 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.io.result import Result
 
 
 def _drawn(result: Result, interpolation: int | None) -> np.ndarray | None:
-    if "tentacles/position" not in result.file:
+    if not result.has(fields.TENTACLE_POSITION):
         return None
     from jellysim.interpolation import interpolate_result
 
@@ -26,12 +27,11 @@ def _drawn(result: Result, interpolation: int | None) -> np.ndarray | None:
 
 
 def _bell(result: Result, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
-    f = result.file
-    if "bell/surface_vertices" not in f:
+    if not result.has(fields.BELL_SURFACE_VERTICES):
         return None
     return (
-        np.asarray(f["bell/surface_vertices"][frame], dtype=np.float64),
-        np.asarray(f["bell/surface_faces"][:], dtype=np.int64),
+        result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float64),
+        result.bell_surface_faces.astype(np.int64),
     )
 
 
@@ -82,19 +82,20 @@ def export_ply(
 ) -> list[Path]:
     import meshio
 
-    f = result.file
     drawn = _drawn(result, interpolation)
+    # The particle kinds of a fluid, read once (None: no fluid, the bell and tentacles instead).
+    kind = result.fluid_kind.astype(np.int32) if result.has(fields.FLUID_POSITION) else None
     paths = []
     for frame in frames:
-        if "fluid/position" in f:
-            alive = np.asarray(f["fluid/alive"][frame], dtype=bool)
-            points = np.asarray(f["fluid/position"][frame])[alive]
-            velocity = np.asarray(f["fluid/velocity"][frame])[alive]
+        if kind is not None:
+            alive = result.read(fields.FLUID_ALIVE, frame)
+            points = result.read(fields.FLUID_POSITION, frame)[alive]
+            velocity = result.read(fields.FLUID_VELOCITY, frame)[alive]
             padded = np.zeros((len(points), 3))
             padded[:, : points.shape[1]] = points
             point_data = {
-                "pressure": np.asarray(f["fluid/pressure"][frame])[alive],
-                "kind": np.asarray(f["fluid/kind"][:], dtype=np.int32)[alive],
+                "pressure": result.read(fields.FLUID_PRESSURE, frame)[alive],
+                "kind": kind[alive],
             }
             for k, name in enumerate("xyz"[: velocity.shape[1]]):
                 point_data[f"v{name}"] = velocity[:, k]

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.io.result import Result
 
 
@@ -123,9 +124,9 @@ def export_usd(
     stage.SetTimeCodesPerSecond(float(f.attrs["fps"]))
     low, high = np.full(3, np.inf), np.full(3, -np.inf)  # everything over the frames, m
 
-    if "bell/surface_vertices" in f:
+    if result.has(fields.BELL_SURFACE_VERTICES):
         bell = UsdGeom.Mesh.Define(stage, "/Jellyfish/Bell")
-        faces = np.asarray(f["bell/surface_faces"][:], dtype=np.int32)
+        faces = result.bell_surface_faces.astype(np.int32)
         bell.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(faces)))
         bell.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
         bell.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
@@ -134,13 +135,13 @@ def export_usd(
         bell.CreateDisplayColorAttr(Vt.Vec3fArray([color]))
         points_attr, extent_attr = bell.CreatePointsAttr(), bell.CreateExtentAttr()
         for frame in frames:
-            points = np.asarray(f["bell/surface_vertices"][frame], dtype=np.float32)
+            points = result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float32)
             points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
             box = _extent(points)
             extent_attr.Set(Vt.Vec3fArray(box), frame)
             _bounds(low, high, box)
 
-    if "tentacles/position" in f:
+    if result.has(fields.TENTACLE_POSITION):
         from jellysim.interpolation import interpolate_result
 
         drawn = interpolate_result(result, interpolation)
@@ -162,15 +163,15 @@ def export_usd(
             extent_attr.Set(Vt.Vec3fArray(box), frame)
             _bounds(low, high, box)
 
-    if "fluid/position" in f:
+    if result.has(fields.FLUID_POSITION):
         cloud = UsdGeom.Points.Define(stage, "/Jellyfish/Fluid")
         spacing = float(f.attrs.get("particle_spacing", 0.01))
         cloud.CreateWidthsAttr(Vt.FloatArray([spacing]))
         cloud.SetWidthsInterpolation(UsdGeom.Tokens.constant)
         points_attr, extent_attr = cloud.CreatePointsAttr(), cloud.CreateExtentAttr()
         for frame in frames:
-            alive = np.asarray(f["fluid/alive"][frame], dtype=bool)
-            points = _to_3d(np.asarray(f["fluid/position"][frame])[alive]).astype(np.float32)
+            alive = result.read(fields.FLUID_ALIVE, frame)
+            points = _to_3d(result.read(fields.FLUID_POSITION, frame)[alive]).astype(np.float32)
             points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
             box = _extent(points, spacing / 2.0)
             extent_attr.Set(Vt.Vec3fArray(box), frame)

@@ -24,6 +24,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.io.result import Result
 
 
@@ -57,22 +58,24 @@ def fluid_mesh(result: Result, frame: int) -> Any:
     """The fluid particles alive at ``frame`` as a meshio Mesh of vertex cells."""
     import meshio
 
-    f = result.file
-    position = np.asarray(f["fluid/position"][frame], dtype=np.float64)
+    position = result.read(fields.FLUID_POSITION, frame).astype(np.float64)
     alive = (
-        np.asarray(f["fluid/alive"][frame], dtype=bool)
-        if "fluid/alive" in f
+        result.read(fields.FLUID_ALIVE, frame)
+        if result.has(fields.FLUID_ALIVE)
         else np.ones(position.shape[0], dtype=bool)
     )
     index = np.nonzero(alive)[0]
     point_data: dict[str, np.ndarray] = {"particle": index.astype(np.int64)}
-    if "fluid/velocity" in f:
-        point_data["velocity"] = _as_3d(np.asarray(f["fluid/velocity"][frame])[index])
-    for name in ("pressure", "number_density"):
-        if f"fluid/{name}" in f:
-            point_data[name] = np.asarray(f[f"fluid/{name}"][frame], dtype=np.float64)[index]
-    if "fluid/kind" in f:
-        point_data["kind"] = np.asarray(f["fluid/kind"][:], dtype=np.int32)[index]
+    if result.has(fields.FLUID_VELOCITY):
+        point_data["velocity"] = _as_3d(result.read(fields.FLUID_VELOCITY, frame)[index])
+    for name, field in (
+        ("pressure", fields.FLUID_PRESSURE),
+        ("number_density", fields.FLUID_NUMBER_DENSITY),
+    ):
+        if result.has(field):
+            point_data[name] = result.read(field, frame).astype(np.float64)[index]
+    if result.has(fields.FLUID_KIND):
+        point_data["kind"] = result.fluid_kind.astype(np.int32)[index]
     cells = [("vertex", np.arange(index.size, dtype=np.int64)[:, None])]
     return meshio.Mesh(_as_3d(position[index]), cells, point_data=point_data)
 
@@ -97,8 +100,8 @@ def tentacle_mesh(drawn: np.ndarray, spacing: float) -> Any:
 def bell_mesh(result: Result, frame: int) -> Any:
     import meshio
 
-    vertices = np.asarray(result.file["bell/surface_vertices"][frame], dtype=np.float64)
-    faces = np.asarray(result.file["bell/surface_faces"][:], dtype=np.int64)
+    vertices = result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float64)
+    faces = result.bell_surface_faces.astype(np.int64)
     return meshio.Mesh(vertices, [("triangle", faces)])
 
 
@@ -106,19 +109,18 @@ def bell_particle_mesh(result: Result, frame: int) -> Any:
     """The mass-spring bell at ``frame``: particles joined by their springs (line cells)."""
     import meshio
 
-    f = result.file
-    position = np.asarray(f["bell/position"][frame], dtype=np.float64)
-    pairs = np.asarray(f["bell/springs"][:], dtype=np.int64)
-    rest = np.asarray(f["bell/rest_position"][:], dtype=np.float64)
+    position = result.read(fields.BELL_POSITION, frame).astype(np.float64)
+    pairs = result.bell_springs.astype(np.int64)
+    rest = result.bell_rest_positions.astype(np.float64)
     return meshio.Mesh(
         position,
         [("line", pairs)],
         point_data={
             "particle": np.arange(len(position), dtype=np.int64),
-            "velocity": np.asarray(f["bell/velocity"][frame], dtype=np.float64),
+            "velocity": result.read(fields.BELL_VELOCITY, frame).astype(np.float64),
         },
         cell_data={
-            "muscle": [np.asarray(f["bell/muscle"][:], dtype=np.int32)],
+            "muscle": [result.bell_muscle.astype(np.int32)],
             "rest_length": [np.linalg.norm(rest[pairs[:, 1]] - rest[pairs[:, 0]], axis=1)],
         },
     )
@@ -130,24 +132,25 @@ def export_vtk(
     """Write the VTU time series of ``frames`` into ``out``; returns the ``.pvd`` files."""
     import meshio
 
-    f = result.file
     times = result.time
     parts: dict[str, list[tuple[float, str]]] = {}
     drawn = None
-    if "tentacles/position" in f:
+    if result.has(fields.TENTACLE_POSITION):
         from jellysim.interpolation import interpolate_result
 
         drawn = interpolate_result(result, interpolation)
     spacing = result.scene.tentacles.spacing
     for frame in frames:
         meshes = {}
-        if "fluid/position" in f:
+        if result.has(fields.FLUID_POSITION):
             meshes["fluid"] = fluid_mesh(result, frame)
         if drawn is not None:
             meshes["tentacles"] = tentacle_mesh(drawn[frame], spacing)
-        if "bell/surface_vertices" in f:
+        if result.has(fields.BELL_SURFACE_VERTICES):
             meshes["bell"] = bell_mesh(result, frame)
-        if "bell/springs" in f:  # a kinematic bell's bell/position is its surface (a link)
+        if result.has(
+            fields.BELL_SPRINGS
+        ):  # a kinematic bell's bell/position is its surface (a link)
             meshes["bell_particles"] = bell_particle_mesh(result, frame)
         for part, mesh in meshes.items():
             name = f"{part}_{frame:05d}.vtu"

@@ -15,7 +15,14 @@ j = 0..N-1 at fraction ``t = j / N`` gets (docs/theory/interpolation.md):
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+from jellysim import fields
+
+if TYPE_CHECKING:
+    from jellysim.io.result import Result
 
 
 def cosine_weight(t: np.ndarray) -> np.ndarray:
@@ -175,7 +182,7 @@ def pulse_period(scene: object) -> float:
 
 
 def interpolate_result(
-    result: object,
+    result: Result,
     factor: int | None = None,
     lag: float | None = None,
     frames: tuple[int, int] | None = None,
@@ -187,11 +194,10 @@ def interpolate_result(
     those frames, (stop - start, T * factor, P, 3), equal to the slice of the whole: it reads
     the frames from ``lag`` before ``start`` on, which the lagged shapes need, and no others.
     """
-    scene = result.scene  # type: ignore[attr-defined]
+    scene = result.scene
     factor = scene.tentacles.interpolation if factor is None else factor
     lag = LAG_FRACTION_OF_PULSE * pulse_period(scene) if lag is None else lag
-    file = result.file  # type: ignore[attr-defined]
-    times = np.asarray(file["time"][:], dtype=np.float64)
+    times = result.time
     start, stop = (0, times.shape[0]) if frames is None else frames
     if not 0 <= start < stop <= times.shape[0]:
         raise ValueError(f"frames {start}:{stop} outside 0:{times.shape[0]}")
@@ -199,8 +205,8 @@ def interpolate_result(
     # shapes at the first frame before that, so the window must begin at or before it).
     first = max(0, int(np.searchsorted(times, times[start] - max(lag, 0.0), side="right")) - 1)
     drawn = interpolate_tentacles(
-        np.asarray(file["tentacles/position"][first:stop], dtype=np.float64),
-        np.asarray(file["bell/margin"][first:stop], dtype=np.float64),
+        result.read(fields.TENTACLE_POSITION, slice(first, stop)),
+        result.read(fields.BELL_MARGIN, slice(first, stop)),
         times[first:stop],
         factor,
         scene.tentacles.spacing,

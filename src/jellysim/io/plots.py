@@ -7,6 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.io.result import Result
 
 
@@ -23,7 +24,7 @@ def root_tip_trace(result: Result, path: Path, tentacle: int = 0) -> Path:
     """Paper Figs. 7-8: x of a tentacle's root and of its tip against time."""
     plt = _pyplot()
     time = result.time
-    x = result.file["tentacles/position"][:, tentacle, :, 0]
+    x = result.tentacle_positions[:, tentacle, :, 0]
     scene = result.scene
     fig, ax = plt.subplots(figsize=(8, 3.6), dpi=120)
     ax.plot(time, x[:, 0], color="tab:red", lw=1.6, label="root")
@@ -49,16 +50,18 @@ def tentacle_shapes(result: Result, path: Path, snapshots: int = 6) -> Path:
     plt = _pyplot()
     frames = result.frames
     picks = np.unique(np.linspace(0, frames - 1, snapshots).round().astype(int))
-    positions = result.file["tentacles/position"]
-    margin = result.file["bell/margin"]
+    positions = result.read(fields.TENTACLE_POSITION, picks.tolist())
+    margins = result.read(fields.BELL_MARGIN, picks.tolist())
     time = result.time
     fig, axes = plt.subplots(
         1, len(picks), figsize=(2.2 * len(picks), 4.4), dpi=120, sharex=True, sharey=True
     )
-    for ax, frame in zip(np.atleast_1d(axes), picks, strict=True):
-        centre = np.array([0.0, 0.0, margin[frame][:, 2].mean()])  # in the bell's frame
-        x = positions[frame] - centre
-        ring = np.vstack([margin[frame], margin[frame][:1]]) - centre
+    for ax, frame, chains, margin in zip(
+        np.atleast_1d(axes), picks, positions, margins, strict=True
+    ):
+        centre = np.array([0.0, 0.0, margin[:, 2].mean()])  # in the bell's frame
+        x = chains - centre
+        ring = np.vstack([margin, margin[:1]]) - centre
         ax.plot(ring[:, 0], ring[:, 2], color="0.5", lw=2)
         for chain in x:
             ax.plot(chain[:, 0], chain[:, 2], lw=1.2)
@@ -110,16 +113,15 @@ def jetting_and_relaxation(result: Result, path: Path) -> Path:
     plt = _pyplot()
     drawn = interpolate_result(result)
     simulated = result.tentacle_positions
-    vertices = result.file["bell/surface_vertices"]
-    margin = result.file["bell/margin"]
-    centre = result.file["bell/centre"]
+    sectors = result.dataset(fields.BELL_MARGIN).shape[1]  # R: vertices per ring
     time = result.time
     scene = result.scene
     factor = drawn.shape[1] // simulated.shape[1]
     fig, axes = plt.subplots(1, 2, figsize=(8.0, 5.2), dpi=120, sharex=True, sharey=True)
     names = ("jetting phase (full contraction)", "relaxation phase")
     for ax, frame, name in zip(axes, phase_frames(result), names, strict=True):
-        origin = centre[frame]
+        origin = result.read(fields.BELL_CENTRE, frame)
+        vertices = result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float64)
         for k, chain in enumerate(drawn[frame] - origin):
             ax.plot(
                 chain[:, 0],
@@ -128,7 +130,7 @@ def jetting_and_relaxation(result: Result, path: Path) -> Path:
                 color="tab:purple" if k % factor == 0 else "tab:orange",
                 alpha=0.9 if k % factor == 0 else 0.45,
             )
-        for outline in _meridians(vertices[frame].astype(np.float64) - origin, margin.shape[1]):
+        for outline in _meridians(vertices - origin, sectors):
             ax.fill(outline[:, 0], outline[:, 2], color="tab:brown", alpha=0.6, lw=0)
             ax.plot(outline[:, 0], outline[:, 2], color="tab:brown", lw=1.2)
         ax.set_title(f"{name}, t = {time[frame]:.2f} s", fontsize=9)
@@ -154,17 +156,18 @@ def surge_front_plot(result: Result, path: Path) -> Path:
     from jellysim.reference import front_errors, martin_moyce, surge_front
 
     plt = _pyplot()
-    f = result.file
-    a = float(f.attrs["column_width"])
+    a = float(result.file.attrs["column_width"])
     g = float(np.linalg.norm(result.scene.water.gravity))
-    positions = np.asarray(f["fluid/position"][:])
+    positions = result.fluid_positions
     alive = (
-        np.asarray(f["fluid/alive"][:], dtype=bool)
-        if "fluid/alive" in f
+        result.fluid_alive
+        if result.has(fields.FLUID_ALIVE)
         else np.ones(positions.shape[:2], dtype=bool)
     )
     fluid = (
-        np.asarray(f["fluid/kind"][:]) == 0 if "fluid/kind" in f else np.ones(alive.shape[1], bool)
+        result.fluid_kind == 0
+        if result.has(fields.FLUID_KIND)
+        else np.ones(alive.shape[1], dtype=bool)
     )
     front = surge_front(positions, alive, fluid, a)
     t = result.time * np.sqrt(2.0 * g / a)
@@ -216,14 +219,14 @@ def hydrostatic_profile(result: Result) -> HydrostaticProfile:
     alternates from step to step by about 4 % of the head (docs/fluid.md, "Still water"), so
     frames taken an odd number of steps apart alternate too; the average over the settled half
     of the run is the profile the validation test holds to rho g (H - y)."""
-    f = result.file
     rho_g = _weight_density(result)
     count = len(result.time)
     first = min(count // 2, count - 1)
-    fluid = np.asarray(f["fluid/kind"][:]) == 0
-    alive = np.all(np.asarray(f["fluid/alive"][first:], dtype=bool), axis=0) & fluid
-    height = np.asarray(f["fluid/position"][first:, :, -1])[:, alive].mean(axis=0)
-    pressure = np.asarray(f["fluid/pressure"][first:])[:, alive].mean(axis=0)
+    settled = slice(first, None)
+    fluid = result.fluid_kind == 0
+    alive = np.all(result.read(fields.FLUID_ALIVE, settled), axis=0) & fluid
+    height = result.read(fields.FLUID_POSITION, settled)[:, alive, -1].mean(axis=0)
+    pressure = result.read(fields.FLUID_PRESSURE, settled)[:, alive].mean(axis=0)
     slope, intercept = np.polyfit(height, pressure, 1)
     window = (float(result.time[first]), float(result.time[-1]))
     return HydrostaticProfile(
@@ -243,7 +246,7 @@ def hydrostatic_plot(result: Result, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(5.6, 4.4), dpi=120)
     ax.plot(profile.pressure, profile.height, ".", ms=3, color="tab:blue", label="fluid particles")
     y = np.linspace(0.0, depth, 50)
-    up = "z" if result.file["fluid/position"].shape[-1] == 3 else "y"
+    up = "z" if result.dataset(fields.FLUID_POSITION).shape[-1] == 3 else "y"
     ax.plot(rho_g * (depth - y), y, color="k", lw=1.4, label=f"ρ g (H − {up}), H = {depth:.4f} m")
     ax.plot(
         profile.slope * rho_g * (profile.head - y),
@@ -275,10 +278,9 @@ def thrust_plot(result: Result, path: Path) -> Path:
     from jellysim.bell.swimming import phase_lag, swim_cycles
 
     plt = _pyplot()
-    f = result.file
     time = result.time
-    height = np.asarray(f["bell/centre"][:, 2])
-    contraction = np.asarray(f["bell/contraction"][:])
+    height = result.bell_centre[:, 2]
+    contraction = result.bell_contraction
     period = result.scene.bell.period
     fig, ax = plt.subplots(figsize=(7.2, 4.2), dpi=120)
     ax.plot(time, height - height[0], color="tab:red", lw=1.6, label="mean height of the bell")
@@ -316,23 +318,23 @@ def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
     folder = folder or result.folder / "plots"
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
-    if "tentacles/position" in result.file:
+    if result.has(fields.TENTACLE_POSITION):
         paths += [
             root_tip_trace(result, folder / "root_tip_trace.png"),
             tentacle_shapes(result, folder / "tentacle_shapes.png"),
         ]
-    if "bell/activation" in result.file:
+    if result.has(fields.BELL_ACTIVATION):
         paths.append(thrust_plot(result, folder / "thrust.png"))
     if (
-        "bell/surface_vertices" in result.file
-        and "tentacles/position" in result.file
+        result.has(fields.BELL_SURFACE_VERTICES)
+        and result.has(fields.TENTACLE_POSITION)
         and result.time[-1] >= result.scene.bell.period
     ):
         paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
-    if "fluid/position" in result.file and "column_width" in result.file.attrs:
+    if result.has(fields.FLUID_POSITION) and "column_width" in result.file.attrs:
         paths.append(surge_front_plot(result, folder / "surge_front.png"))
     if (
-        "fluid/position" in result.file
+        result.has(fields.FLUID_POSITION)
         and "water_depth" in result.file.attrs
         and np.any(result.scene.water.gravity)  # weightless water has no hydrostatic law
     ):

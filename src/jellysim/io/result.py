@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -20,22 +21,28 @@ from typing import Any
 import h5py
 import numpy as np
 
+from jellysim import fields
 from jellysim.errors import InputError
-from jellysim.fields import Dataset
+from jellysim.fields import Dataset, Field
 
 RESULT_FILE = "result.h5"
 
+# Which frames to read: one (int), a slice (step >= 1), or increasing indices.
+Frames = int | slice | Sequence[int]
+
 
 def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[Dataset]:
+    """The per-frame datasets of a tentacle simulation: T = ``tentacles`` chains of
+    P = ``particles``, R = ``margin_points`` margin points."""
     return [
-        Dataset("time", (), "s"),
-        Dataset("tentacles/position", (tentacles, particles, 3), "m"),
-        Dataset("tentacles/velocity", (tentacles, particles, 3), "m/s"),
-        Dataset("tentacles/constraint_error", (), "1"),
-        Dataset("tentacles/projection_iterations", (), "1", np.int32),
-        Dataset("bell/rim", (tentacles, 3), "m"),
-        Dataset("bell/rim_velocity", (tentacles, 3), "m/s"),
-        Dataset("bell/margin", (margin_points, 3), "m"),
+        fields.TIME.dataset(),
+        fields.TENTACLE_POSITION.dataset(T=tentacles, P=particles),
+        fields.TENTACLE_VELOCITY.dataset(T=tentacles, P=particles),
+        fields.TENTACLE_CONSTRAINT_ERROR.dataset(),
+        fields.TENTACLE_PROJECTION_ITERATIONS.dataset(),
+        fields.BELL_RIM.dataset(T=tentacles),
+        fields.BELL_RIM_VELOCITY.dataset(T=tentacles),
+        fields.BELL_MARGIN.dataset(R=margin_points),
     ]
 
 
@@ -100,13 +107,13 @@ class ResultWriter:
         self._batch_frames = batch_frames
         self._batch_seconds = batch_seconds
         self._last_flush = time.monotonic()
-        self.frames = 0 if initial is None else int(initial["time"].shape[0])
+        self.frames = 0 if initial is None else int(initial[fields.TIME.path].shape[0])
 
     def append(self, values: dict[str, np.ndarray | float]) -> None:
         """Add one frame (every dataset); it reaches the disk with the next flush."""
         for name, buffer in self._buffer.items():
             buffer.append(np.array(values[name], copy=True))
-        pending = len(self._buffer["time"])
+        pending = len(self._buffer[fields.TIME.path])
         if (
             pending >= self._batch_frames
             or time.monotonic() - self._last_flush >= self._batch_seconds
@@ -115,12 +122,12 @@ class ResultWriter:
 
     def flush(self) -> None:
         """Write the buffered frames and flush them to disk."""
-        pending = len(self._buffer["time"])
+        pending = len(self._buffer[fields.TIME.path])
         if pending:
             start = self.frames
             # ``time`` goes last: its length is the count of written frames, so a kill in the
             # middle of a batch leaves the other datasets at least that long, never shorter.
-            for name in sorted(self._datasets, key=lambda name: name == "time"):
+            for name in sorted(self._datasets, key=lambda name: name == fields.TIME.path):
                 ds = self._datasets[name]
                 ds.resize(start + pending, axis=0)
                 ds[start:] = np.stack(self._buffer[name])
@@ -151,12 +158,29 @@ def read_frames(path: Path, datasets: list[Dataset], count: int) -> dict[str, np
         return {spec.path: f[spec.path][:count] for spec in datasets}
 
 
+# What writes each group of datasets, for the message when a result lacks one.
+_WRITTEN_BY = {
+    "tentacles": "tentacles are written by scenes that simulate them (tentacles.count > 0)",
+    "bell": (
+        "the rim and margin come with tentacles or a bell, the body with bell.model = "
+        "'kinematic' (surface, centre, contraction) or 'mass-spring' (all bell datasets)"
+    ),
+    "fluid": "the fluid is written by MPS scenes and the mass-spring bell's tank",
+    "solver": "the pressure solver's record is written by MPS scenes and the mass-spring bell",
+}
+
+
 class Result:
     """A result opened for reading: ``with jellysim.open_result(DIR) as r: ...``.
 
-    Arrays are read on access (F = frames written): ``time`` (F,) s; ``tentacle_positions`` and
-    ``tentacle_velocities`` (F, T, P, 3) m, m/s; ``rim``, ``rim_velocity`` (F, T, 3);
-    ``margin`` (F, R, 3) m. ``file`` is the open :class:`h5py.File` for anything else.
+    Each dataset of the layout (:mod:`jellysim.fields`) has an accessor that reads it on access
+    and returns it as stored (shapes, dtypes and units in each accessor; axis letters as in
+    :mod:`jellysim.fields`, F = frames written). Per-frame arrays hold the frames written only
+    (a run killed mid-batch may leave a few more rows, which never counted); static arrays are
+    read whole. An accessor of a dataset the result does not have raises :class:`InputError`
+    naming it and what writes it; :meth:`has` asks first. :meth:`read` reads any field, or a
+    few frames of it; :meth:`dataset` gives the stored dataset unread; ``file`` is the open
+    :class:`h5py.File` for anything else (root attributes).
     """
 
     def __init__(self, folder: str | os.PathLike[str]) -> None:
@@ -187,37 +211,196 @@ class Result:
     def close(self) -> None:
         self.file.close()
 
-    def _array(self, name: str) -> np.ndarray:
-        # A run killed mid-batch may leave a dataset longer than ``time``; those rows never counted.
-        return np.asarray(self.file[name][: self.frames])
+    def has(self, field: Field) -> bool:
+        """Whether the result holds ``field``."""
+        return field.path in self.file
 
-    @property
-    def time(self) -> np.ndarray:
-        return self._array("time")
+    def dataset(self, field: Field) -> h5py.Dataset:
+        """``field``'s stored dataset, unread (to read parts of a large one); a per-frame one may
+        hold rows past :attr:`frames` (see :meth:`read`). Raises :class:`InputError` when the
+        result has no such dataset."""
+        if field.path not in self.file:
+            group = field.path.partition("/")[0]
+            model = self.file.attrs.get("bell_model")
+            scene = "" if model is None else f" (this result's bell.model = '{model}')"
+            raise InputError(
+                f"{self.path}: no dataset {field.path} ({field.doc}){scene}\n"
+                f"{_WRITTEN_BY.get(group, 'see docs/results.md')}"
+            )
+        return self.file[field.path]
 
-    @property
-    def tentacle_positions(self) -> np.ndarray:
-        return self._array("tentacles/position")
-
-    @property
-    def tentacle_velocities(self) -> np.ndarray:
-        return self._array("tentacles/velocity")
-
-    @property
-    def rim(self) -> np.ndarray:
-        return self._array("bell/rim")
-
-    @property
-    def rim_velocity(self) -> np.ndarray:
-        return self._array("bell/rim_velocity")
-
-    @property
-    def margin(self) -> np.ndarray:
-        return self._array("bell/margin")
+    def read(self, field: Field, frames: Frames | None = None) -> np.ndarray:
+        """``field`` as stored: a per-frame field's frames written (F, ...), or only ``frames``
+        of them (an index drops the frame axis; a slice or increasing indices keep it); a static
+        field whole. Raises :class:`InputError` when the result has no such dataset, IndexError
+        for a frame not written."""
+        data = self.dataset(field)
+        if not field.per_frame:
+            if frames is not None:
+                raise ValueError(f"{field.path} is written once: it has no frames to pick")
+            return np.asarray(data[()])
+        count = self.frames
+        if frames is None:
+            return np.asarray(data[:count])
+        if isinstance(frames, slice):
+            start, stop, step = frames.indices(count)
+            if step < 1:
+                raise ValueError(f"{field.path}: frames {frames} run backwards")
+            return np.asarray(data[start:stop:step])
+        if isinstance(frames, int | np.integer):
+            index = range(count)[frames]  # IndexError past the frames written
+            return np.asarray(data[index])
+        picks = [range(count)[int(k)] for k in frames]
+        return np.asarray(data[picks])
 
     @property
     def frames(self) -> int:
-        return int(self.file["time"].shape[0])
+        """Frames written (the length of ``time``)."""
+        return int(self.file[fields.TIME.path].shape[0])
+
+    # Per-frame arrays, (F, ...).
+
+    @property
+    def time(self) -> np.ndarray:
+        """(F,) float64, s: the frame times."""
+        return self.read(fields.TIME)
+
+    @property
+    def tentacle_positions(self) -> np.ndarray:
+        """(F, T, P, 3) float64, m: simulated tentacle particles, root first."""
+        return self.read(fields.TENTACLE_POSITION)
+
+    @property
+    def tentacle_velocities(self) -> np.ndarray:
+        """(F, T, P, 3) float64, m/s: their velocities."""
+        return self.read(fields.TENTACLE_VELOCITY)
+
+    @property
+    def tentacle_constraint_error(self) -> np.ndarray:
+        """(F,) float64, 1: the largest relative segment-length error in each frame."""
+        return self.read(fields.TENTACLE_CONSTRAINT_ERROR)
+
+    @property
+    def tentacle_projection_iterations(self) -> np.ndarray:
+        """(F,) int32, 1: the most length-projection iterations of a substep in each frame."""
+        return self.read(fields.TENTACLE_PROJECTION_ITERATIONS)
+
+    @property
+    def rim(self) -> np.ndarray:
+        """(F, T, 3) float64, m: the tentacle base points (what drove the roots)."""
+        return self.read(fields.BELL_RIM)
+
+    @property
+    def rim_velocity(self) -> np.ndarray:
+        """(F, T, 3) float64, m/s: their velocities."""
+        return self.read(fields.BELL_RIM_VELOCITY)
+
+    @property
+    def margin(self) -> np.ndarray:
+        """(F, R, 3) float64, m: the bell margin as a closed polyline."""
+        return self.read(fields.BELL_MARGIN)
+
+    @property
+    def bell_positions(self) -> np.ndarray:
+        """(F, B, 3), m: the mass-spring bell's particles (float64), or the kinematic bell's
+        surface vertices (float32, the same dataset as :attr:`bell_surface_vertices`)."""
+        return self.read(fields.BELL_POSITION)
+
+    @property
+    def bell_velocities(self) -> np.ndarray:
+        """(F, B, 3) float64, m/s: the mass-spring bell's particle velocities."""
+        return self.read(fields.BELL_VELOCITY)
+
+    @property
+    def bell_surface_vertices(self) -> np.ndarray:
+        """(F, V, 3) float32, m: the bell's smooth surface, for rendering (its triangles:
+        :attr:`bell_surface_faces`)."""
+        return self.read(fields.BELL_SURFACE_VERTICES)
+
+    @property
+    def bell_centre(self) -> np.ndarray:
+        """(F, 3) float64, m: the bell's centre (the mass-spring bell's mean particle, the
+        kinematic bell's margin centre)."""
+        return self.read(fields.BELL_CENTRE)
+
+    @property
+    def bell_contraction(self) -> np.ndarray:
+        """(F,) float64, 1: the fraction of the margin radius lost (0 relaxed)."""
+        return self.read(fields.BELL_CONTRACTION)
+
+    @property
+    def bell_activation(self) -> np.ndarray:
+        """(F,) float64, 1: the mass-spring bell's muscle activation a(t) in [0, 1]."""
+        return self.read(fields.BELL_ACTIVATION)
+
+    @property
+    def fluid_positions(self) -> np.ndarray:
+        """(F, N, D), m: fluid, wall and dummy particles, D = 2 or 3; float64, float32 in a
+        mass-spring bell's tank."""
+        return self.read(fields.FLUID_POSITION)
+
+    @property
+    def fluid_velocities(self) -> np.ndarray:
+        """(F, N, D), m/s: their velocities (dtype as :attr:`fluid_positions`)."""
+        return self.read(fields.FLUID_VELOCITY)
+
+    @property
+    def fluid_pressure(self) -> np.ndarray:
+        """(F, N), Pa: their pressure (dtype as :attr:`fluid_positions`)."""
+        return self.read(fields.FLUID_PRESSURE)
+
+    @property
+    def fluid_number_density(self) -> np.ndarray:
+        """(F, N), 1: their MPS particle number density (dtype as :attr:`fluid_positions`)."""
+        return self.read(fields.FLUID_NUMBER_DENSITY)
+
+    @property
+    def fluid_alive(self) -> np.ndarray:
+        """(F, N) bool: False from the frame a particle left the domain."""
+        return self.read(fields.FLUID_ALIVE)
+
+    @property
+    def solver_iterations(self) -> np.ndarray:
+        """(F,) int32, 1: pressure-solver iterations of each frame's last step."""
+        return self.read(fields.SOLVER_ITERATIONS)
+
+    @property
+    def solver_residual(self) -> np.ndarray:
+        """(F,) float64, 1: that solve's relative residual."""
+        return self.read(fields.SOLVER_RESIDUAL)
+
+    @property
+    def solver_steps(self) -> np.ndarray:
+        """(F,) int32, 1: MPS steps in each frame."""
+        return self.read(fields.SOLVER_STEPS)
+
+    # Static arrays, written once.
+
+    @property
+    def bell_surface_faces(self) -> np.ndarray:
+        """(M, 3) int32: triangles over the surface vertices, counter-clockwise seen from
+        outside."""
+        return self.read(fields.BELL_SURFACE_FACES)
+
+    @property
+    def bell_springs(self) -> np.ndarray:
+        """(S, 2) int64: the mass-spring bell's particle pairs joined by springs."""
+        return self.read(fields.BELL_SPRINGS)
+
+    @property
+    def bell_muscle(self) -> np.ndarray:
+        """(S,) bool: the springs of the circular muscle."""
+        return self.read(fields.BELL_MUSCLE)
+
+    @property
+    def bell_rest_positions(self) -> np.ndarray:
+        """(B, 3) float64, m: the mass-spring bell's particles at rest."""
+        return self.read(fields.BELL_REST_POSITION)
+
+    @property
+    def fluid_kind(self) -> np.ndarray:
+        """(N,) int8: 0 fluid, 1 wall, 2 dummy."""
+        return self.read(fields.FLUID_KIND)
 
     @property
     def expected_frames(self) -> int:

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.errors import InputError
 from jellysim.io.folders import output_folder
 from jellysim.io.result import Result
@@ -78,9 +79,9 @@ class Member:
     def centres(self) -> np.ndarray:
         """The bell's margin centre per frame (F, 3), shifted and phased as drawn (the centre
         of the drawn box for a result without a bell)."""
-        if "bell/margin" not in self.result.file:
+        if not self.result.has(fields.BELL_MARGIN):
             return self.boxes().mean(axis=1)
-        margin_centre = np.asarray(self.result.file["bell/margin"][:]).mean(axis=1)
+        margin_centre = self.result.margin.mean(axis=1)
         k = (np.arange(margin_centre.shape[0]) + self.phase) % margin_centre.shape[0]
         shift = 0.0 if self.shift is None else self.shift
         return margin_centre[k] + self.offset + shift
@@ -123,7 +124,7 @@ def fluid_radius(result: Result) -> float:
     if spacing is None:
         from scipy.spatial import cKDTree
 
-        points = to_world(np.asarray(result.file["fluid/position"][0], dtype=np.float64))
+        points = to_world(result.read(fields.FLUID_POSITION, 0).astype(np.float64))
         distances, _ = cKDTree(points).query(points, k=2)
         spacing = float(np.median(distances[:, 1]))
     return 0.5 * float(spacing)
@@ -181,7 +182,7 @@ def make_members(
 
     drawn = [
         interpolate_result(r, interpolation)
-        if "tentacles/position" in r.file
+        if r.has(fields.TENTACLE_POSITION)
         else np.zeros((r.frames, 0, 1, 3))
         for r in results
     ]
@@ -214,8 +215,8 @@ def make_members(
                     bell_color=_shift_hue(look.bell_color, turn),
                     tentacle_color=_shift_hue(look.tentacle_color, turn),
                 )
-        has_bell = "bell/surface_vertices" in result.file
-        has_fluid = fluid and "fluid/position" in result.file
+        has_bell = result.has(fields.BELL_SURFACE_VERTICES)
+        has_fluid = fluid and result.has(fields.FLUID_POSITION)
         shift = _phase_shift(result, phase) if phase else None
         members.append(
             Member(
@@ -224,10 +225,12 @@ def make_members(
                 phase=phase,
                 look=look,
                 tentacles=drawn[which],
-                bell_vertices=result.file["bell/surface_vertices"] if has_bell else None,
-                bell_faces=result.file["bell/surface_faces"][:] if has_bell else None,
-                fluid=result.file["fluid/position"] if has_fluid else None,
-                fluid_alive=result.file["fluid/alive"] if "fluid/alive" in result.file else None,
+                bell_vertices=result.dataset(fields.BELL_SURFACE_VERTICES) if has_bell else None,
+                bell_faces=result.bell_surface_faces if has_bell else None,
+                fluid=result.dataset(fields.FLUID_POSITION) if has_fluid else None,
+                fluid_alive=(
+                    result.dataset(fields.FLUID_ALIVE) if result.has(fields.FLUID_ALIVE) else None
+                ),
                 shift=shift,
             )
         )
@@ -237,9 +240,9 @@ def make_members(
 def _phase_shift(result: Result, phase: int) -> np.ndarray | None:
     """(F, 3) m: what brings a swimmer shown ``phase`` frames later back onto the straight line
     of its mean swim at each frame, so that a phase shift shifts the pulse, not the place."""
-    if "bell/margin" not in result.file:
+    if not result.has(fields.BELL_MARGIN):
         return None
-    centres = np.asarray(result.file["bell/margin"][:]).mean(axis=1)
+    centres = result.margin.mean(axis=1)
     frames = centres.shape[0]
     t = np.arange(frames, dtype=np.float64)
     if frames < 2:
@@ -254,10 +257,10 @@ def _extent(result: Result, drawn: np.ndarray, fluid: bool = True) -> float:
     size, not how far it swims."""
     frames = result.frames
     parts = [drawn.reshape(frames, -1, 3)]
-    if fluid and "fluid/position" in result.file:
-        parts.append(to_world(np.asarray(result.file["fluid/position"][:], dtype=np.float64)))
-    if "bell/surface_vertices" in result.file:
-        parts.append(np.asarray(result.file["bell/surface_vertices"][:], dtype=np.float64))
+    if fluid and result.has(fields.FLUID_POSITION):
+        parts.append(to_world(result.fluid_positions.astype(np.float64)))
+    if result.has(fields.BELL_SURFACE_VERTICES):
+        parts.append(result.bell_surface_vertices.astype(np.float64))
     points = np.concatenate(parts, axis=1)
     if points.shape[1] == 0:
         return 1.0
@@ -408,7 +411,7 @@ def render(
         raise InputError(f"--fluid {fluid}: expected one of {', '.join(FLUID_MODES)}")
     if fluid == "auto":
         jellyfish = any(
-            "tentacles/position" in r.file or "bell/surface_vertices" in r.file for r in results
+            r.has(fields.TENTACLE_POSITION) or r.has(fields.BELL_SURFACE_VERTICES) for r in results
         )
         fluid = "none" if jellyfish else "spheres"
     if quality not in povray.QUALITIES:

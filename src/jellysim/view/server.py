@@ -32,6 +32,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from jellysim import fields
 from jellysim.errors import InputError
 from jellysim.io.result import Result, open_result
 
@@ -96,26 +97,30 @@ class ResultData:
         if self.frames == 0:
             raise InputError(f"{result.path}: the result holds no frames yet")
         scene = result.scene
-        self.has_bell = "bell/surface_vertices" in f and "bell/surface_faces" in f
-        self.has_tentacles = (
-            "tentacles/position" in f
-            and "bell/margin" in f
-            and f["tentacles/position"].shape[1] > 0
+        self.has_bell = result.has(fields.BELL_SURFACE_VERTICES) and result.has(
+            fields.BELL_SURFACE_FACES
         )
-        self.has_fluid = "fluid/position" in f
-        self.simulated = int(f["tentacles/position"].shape[1]) if self.has_tentacles else 0
-        self.particles = int(f["tentacles/position"].shape[2]) if self.has_tentacles else 0
+        self.has_tentacles = (
+            result.has(fields.TENTACLE_POSITION)
+            and result.has(fields.BELL_MARGIN)
+            and result.dataset(fields.TENTACLE_POSITION).shape[1] > 0
+        )
+        self.has_fluid = result.has(fields.FLUID_POSITION)
+        tentacles = result.dataset(fields.TENTACLE_POSITION).shape if self.has_tentacles else None
+        self.simulated = 0 if tentacles is None else int(tentacles[1])
+        self.particles = 0 if tentacles is None else int(tentacles[2])
         per_factor = max(1, self.simulated * self.particles)
         self.max_interpolation = max(1, min(MAX_INTERPOLATION, POINT_BUDGET // per_factor))
         self.interpolation = min(int(scene.tentacles.interpolation), self.max_interpolation)
-        self.fluid_count = int(f["fluid/position"].shape[1]) if self.has_fluid else 0
+        fluid = result.dataset(fields.FLUID_POSITION).shape if self.has_fluid else None
+        self.fluid_count = 0 if fluid is None else int(fluid[1])
         look = scene_look(scene)
         self._meta: dict[str, Any] = {
             "name": str(scene.name),
             "fps": float(f.attrs.get("fps", scene.fps)),
             "frames": self.frames,
             "complete": bool(f.attrs.get("frames_expected", self.frames) == self.frames),
-            "time": [float(t) for t in f["time"][:]],
+            "time": [float(t) for t in result.time],
             "look": {
                 "bell_color": _color(look.bell_color),
                 "tentacle_color": _color(look.tentacle_color),
@@ -126,8 +131,14 @@ class ResultData:
             },
             "bell": {
                 "present": self.has_bell,
-                "vertices": int(f["bell/surface_vertices"].shape[1]) if self.has_bell else 0,
-                "faces": int(f["bell/surface_faces"].shape[0]) if self.has_bell else 0,
+                "vertices": (
+                    int(result.dataset(fields.BELL_SURFACE_VERTICES).shape[1])
+                    if self.has_bell
+                    else 0
+                ),
+                "faces": (
+                    int(result.dataset(fields.BELL_SURFACE_FACES).shape[0]) if self.has_bell else 0
+                ),
             },
             "tentacles": {
                 "present": self.has_tentacles,
@@ -139,7 +150,7 @@ class ResultData:
             "fluid": {
                 "present": self.has_fluid,
                 "particles": self.fluid_count,
-                "dimensions": int(f["fluid/position"].shape[2]) if self.has_fluid else 0,
+                "dimensions": 0 if fluid is None else int(fluid[2]),
                 "radius": fluid_radius(result) if self.has_fluid else 0.0,
             },
             **self._bounds(),
@@ -153,15 +164,15 @@ class ResultData:
         return self._meta
 
     def _bounds(self) -> dict[str, Any]:
-        f = self.result.file
+        result = self.result
         sample = sorted({round(x) for x in np.linspace(0, self.frames - 1, BOUNDS_SAMPLES)})
         low = np.full((len(sample), 3), np.inf)
         high = np.full((len(sample), 3), -np.inf)
         parts = []
         if self.has_bell:
-            parts.append(np.asarray(f["bell/surface_vertices"][sample], dtype=np.float64))
+            parts.append(result.read(fields.BELL_SURFACE_VERTICES, sample).astype(np.float64))
         if self.has_tentacles:
-            positions = np.asarray(f["tentacles/position"][sample], dtype=np.float64)
+            positions = result.read(fields.TENTACLE_POSITION, sample).astype(np.float64)
             parts.append(positions.reshape(len(sample), -1, 3))
         if self.has_fluid:
             parts.append(self._fluid_world(sample))
@@ -183,26 +194,24 @@ class ResultData:
         """Fluid particles (C, N, 3) m as drawn: 2-D (x, y up) as (x, 0, y), dead ones NaN."""
         from jellysim.render.pipeline import to_world
 
-        f = self.result.file
-        points = to_world(np.asarray(f["fluid/position"][frames], dtype=np.float64))
-        if "fluid/alive" in f:
-            points[~np.asarray(f["fluid/alive"][frames], dtype=bool)] = np.nan
+        result = self.result
+        points = to_world(result.read(fields.FLUID_POSITION, frames).astype(np.float64))
+        if result.has(fields.FLUID_ALIVE):
+            points[~result.read(fields.FLUID_ALIVE, frames)] = np.nan
         return points
 
     def bell_faces(self) -> bytes:
         if not self.has_bell:
             raise LookupError("the result has no bell")
-        faces = np.asarray(self.result.file["bell/surface_faces"][:])
-        return faces.astype("<u4").tobytes()
+        return self.result.bell_surface_faces.astype("<u4").tobytes()
 
     def fluid_kinds(self) -> bytes:
         """Particle kinds (N,) uint8: 0 fluid, 1 wall, 2 dummy (all 0 when not stored)."""
         if not self.has_fluid:
             raise LookupError("the result has no fluid")
-        f = self.result.file
-        if "fluid/kind" not in f:
+        if not self.result.has(fields.FLUID_KIND):
             return bytes(self.fluid_count)
-        return np.asarray(f["fluid/kind"][:]).astype("<u1").tobytes()
+        return self.result.fluid_kind.astype("<u1").tobytes()
 
     def chunk(self, part: str, start: int, count: int, interpolation: int | None) -> bytes:
         """Frames ``start`` to ``start + count - 1`` of ``part`` as little-endian float32."""
@@ -214,11 +223,10 @@ class ResultData:
                 f"at most {MAX_CHUNK_FRAMES} per request"
             )
         stop = min(self.frames, start + count)
-        f = self.result.file
         if part == "bell":
             if not self.has_bell:
                 raise LookupError("the result has no bell")
-            data = np.asarray(f["bell/surface_vertices"][start:stop])
+            data = self.result.read(fields.BELL_SURFACE_VERTICES, slice(start, stop))
         elif part == "fluid":
             if not self.has_fluid:
                 raise LookupError("the result has no fluid")
