@@ -57,9 +57,13 @@ class SoftBellSimulation(Simulation):
 
     def step_frame(self) -> None:
         """Advance water, bell and tentacles to the next frame time."""
+        # Water and bell to the frame time: springs and muscle in MPS's explicit stage
+        # (Eq. B8-B9, §4.2.2), the bell particles fluid particles in every other stage.
         self.coupling.advance((self.frame + 1) * self.frame_dt, self.frame_dt)
         self.frame += 1
+        # The margin recorded at the new frame: roots, clamp directions, polyline (Eq. B10).
         self.coupling.record(self.frame)
+        # The tentacles through the frame, roots by cubic Hermite between records (Eq. B11).
         if self.tentacles is not None:
             self.tentacles.step_frame()
         self.notify()
