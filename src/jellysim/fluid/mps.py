@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections.abc import Callable
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -267,6 +268,20 @@ class StepStats:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
+class PhaseTimer:
+    """Wall time (s) of named phases, added into ``seconds`` by phase name: ``with
+    timer("solve"): ...`` adds the time the block took to ``seconds["solve"]``."""
+
+    def __init__(self, seconds: dict[str, float] | None = None) -> None:
+        self.seconds = {} if seconds is None else seconds
+
+    @contextmanager
+    def __call__(self, name: str) -> Iterator[None]:
+        start = _time.perf_counter()
+        yield
+        self.seconds[name] = self.seconds.get(name, 0.0) + _time.perf_counter() - start
+
+
 class MPSSolver:
     """An MPS fluid: live state arrays mutated in place by :meth:`step`.
 
@@ -335,7 +350,7 @@ class MPSSolver:
         self._acceleration = np.empty_like(self.velocity)
         self._start_position = np.empty_like(self.position)  # r^k, during a step
         self._neighbour_count = np.zeros(n, dtype=np.int64)
-        self._scratch = np.zeros(n)
+        self._start_number_density = np.zeros(n)  # n^k, mixed source only
         self._row_of = np.empty(n, dtype=np.int64)
         # Verlet list (neighbour_skin > 0): candidates within search_radius + skin of each
         # particle at the reference positions; None until the first use.
@@ -399,69 +414,98 @@ class MPSSolver:
         not converge within ``max_iterations`` or leaves non-finite values; the state is then
         that of the failed step.
         """
+        stats = StepStats()
+        timer = PhaseTimer(stats.seconds)
+        with timer("neighbours"):
+            # Neighbours at r^k, and n^k for the mixed source [Tanaka & Masunaga 2010], Eq. (F2)
+            start = self._start_neighbours()
+        with timer("explicit"):
+            # Explicit stage: viscosity, gravity, external force, Eq. (F5); collisions, Eq. (F6)
+            self._explicit_stage(dt, start, external_force)
+            self._collide(dt, start)
+        with timer("neighbours"):
+            # Rows at r*: the fluid and the walls it reaches within the step
+            wet = self._wet(start)
+        # Neighbours, number density n*, free surface and PPE at r*, Eq. (F2), (F7)-(F9)
+        system = self.poisson_system(
+            dt,
+            timer,
+            reuse=True,
+            rows=wet,
+            start_density=self._start_number_density if self.params.source == "mixed" else None,
+        )
+        stats.surface = system.surface
+        with timer("solve"):
+            # Pressure by ICCG, CG or deflated CG, warm-started, Eq. (F11)-(F12)
+            stats.iterations, stats.residual, stats.ic_shift = self._solve_pressure(system)
+        with timer("correction"):
+            # Pressure gradient and correction, Eq. (F10) or (F10a), (F13)
+            self._correct(dt, system)
+            self.time += dt
+            # Particles that left the domain or stopped being finite die
+            self._remove_escaped()
+            stats.dead = int((~self.alive).sum())
+        return stats
+
+    def _start_neighbours(self) -> Neighbours:
+        """The neighbour list at r^k (the "start" buffers), with rows for the particles the
+        explicit stage moves and, for the mixed source, the walls, whose n^k enters the PPE; for
+        the mixed source also n^k, Eq. (F2), into ``_start_number_density``."""
         p = self.params
         c = self.constants
-        stats = StepStats()
-        clock = _time.perf_counter()
-
-        def lap(name: str) -> None:
-            nonlocal clock
-            now = _time.perf_counter()
-            stats.seconds[name] = stats.seconds.get(name, 0.0) + now - clock
-            clock = now
-
-        # Neighbours at r^k: rows for the particles the explicit stage moves (and, for the mixed
-        # source, the walls, whose n^k enters the PPE)
         moving = self.kind == FLUID if p.source == "standard" else self.kind != DUMMY
-        nb = self.neighbours(moving, "start")
-        if p.source == "mixed":  # n^k for the mixed source [Tanaka & Masunaga 2010]
+        start = self.neighbours(moving, "start")
+        if p.source == "mixed":
             kernels.number_density(
-                nb, self.alive, c.re_number_density, self._scratch, self._neighbour_count
-            )
-        lap("neighbours")
+                start, self.alive, c.re_number_density, self._start_number_density,
+                self._neighbour_count,
+            )  # fmt: skip
+        return start
 
-        # Explicit stage: viscosity, gravity, external force, Eq. (F5)
+    def _explicit_stage(
+        self, dt: float, start: Neighbours, external_force: np.ndarray | None
+    ) -> None:
+        """u* and r* of Eq. (F5) (viscosity, gravity and ``external_force / density``) into the
+        scratch ``_velocity`` and ``_position``; r^k kept in ``_start_position`` (:meth:`_wet`)."""
+        p = self.params
         self._start_position[:] = self.position
         self._acceleration[:] = p.gravity_vector
         if external_force is not None:
             self._acceleration += external_force / p.density
         kernels.explicit_stage(
-            self.position, self.velocity, self.kind, self.alive, nb, c,
+            self.position, self.velocity, self.kind, self.alive, start, self.constants,
             self._acceleration, dt, self._position, self._velocity,
         )  # fmt: skip
-        # Collision model, Eq. (F6); r^k neighbours hold every pair closer than the collision
-        # distance at r* (a particle moves well under l0 in the explicit stage).
+
+    def _collide(self, dt: float, start: Neighbours) -> None:
+        """The collision model, Eq. (F6), from the scratch r*, u* into ``position`` and
+        ``velocity``. The r^k list holds every pair closer than the collision distance at r* (a
+        particle moves well under l0 in the explicit stage)."""
+        p = self.params
         kernels.collision(
-            self._position, self._velocity, self.kind, self.alive, nb,
+            self._position, self._velocity, self.kind, self.alive, start,
             p.collision_distance * p.l0, p.collision_restitution, dt,
             self.position, self.velocity,
         )  # fmt: skip
-        lap("explicit")
 
-        # Neighbours, number density n*, free surface and PPE at r*, Eq. (F2), (F7)-(F9)
-        system = self.poisson_system(
-            dt,
-            clock=lap,
-            reuse=True,
-            rows=self._wet(nb),
-            start_density=self._scratch if p.source == "mixed" else None,
-        )
-        stats.surface = system.surface
-        matrix, rhs, particles = system.matrix, system.rhs, system.particles
-
-        # Solve by ICCG, CG or deflated CG, warm-started from the last pressure, Eq. (F11)-(F12)
+    def _solve_pressure(self, system: PoissonSystem) -> tuple[int, float, float]:
+        """Solve ``system`` with the ``solver`` by name, warm-started from the last pressure, Eq.
+        (F11)-(F12), into ``pressure`` (0 off the unknowns, negative pressures clipped to 0).
+        Returns the iterations, the final relative residual and the IC(0) diagonal shift; raises
+        :class:`FluidDiverged` when the solve fails or stops short of ``tolerance``."""
+        p = self.params
+        particles = system.particles
         solution = self.pressure[particles]
         try:
             coarse = CoarseSpace(self.position[particles], self.domain_min, p.coarse_cell * p.l0)
-            iterations, residual, stats.ic_shift = solve(
-                matrix, rhs, solution, p.solver, p.tolerance, p.max_iterations, coarse
-            )
+            iterations, residual, ic_shift = solve(
+                system.matrix, system.rhs, solution, p.solver, p.tolerance, p.max_iterations,
+                coarse,
+            )  # fmt: skip
         except FluidDiverged as error:
             raise FluidDiverged(
                 str(error), time=self.time, iterations=0, residual=math.inf
             ) from None
-        stats.iterations = iterations
-        stats.residual = residual
         if not (residual <= p.tolerance and np.all(np.isfinite(solution))):
             raise FluidDiverged(
                 f"pressure solve stopped at relative residual {residual:.3g} after "
@@ -471,19 +515,27 @@ class MPSSolver:
                 residual=residual,
             )
         self.pressure[:] = 0.0
-        self.pressure[particles] = np.maximum(solution, 0.0)  # negative pressures clipped
-        lap("solve")
+        self.pressure[particles] = np.maximum(solution, 0.0)
+        return iterations, residual, ic_shift
 
-        # Pressure gradient and correction, Eq. (F10) or (F10a), (F13)
+    def _correct(self, dt: float, system: PoissonSystem) -> None:
+        """The pressure gradient, Eq. (F10) or (F10a) (and (F10b) with ``surface_repulsion``),
+        and the velocity and position correction, Eq. (F13), in place."""
+        p = self.params
+        surface = (  # the fluid particles on the free surface, for Eq. (F10b)
+            self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None
+        )
         kernels.pressure_correction(
             self.position, self.velocity, self.pressure, self.kind, self.alive,
-            system.neighbours, c, dt, self._position, self._velocity, p.gradient == "corrected",
-            self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None,
+            system.neighbours, self.constants, dt, self._position, self._velocity,
+            p.gradient == "corrected", surface,
         )  # fmt: skip
         self.position[:] = self._position
         self.velocity[:] = self._velocity
-        self.time += dt
-        # Particles that left the domain or stopped being finite die
+
+    def _remove_escaped(self) -> None:
+        """Fluid particles outside the domain or no longer finite die: ``alive`` False, velocity
+        and pressure 0."""
         leaving = self.alive & (self.kind == FLUID)
         finite = np.isfinite(self.position).all(axis=1) & np.isfinite(self.velocity).all(axis=1)
         inside = np.all((self.position >= self.domain_min) & (self.position <= self.domain_max), 1)
@@ -492,9 +544,6 @@ class MPSSolver:
             self.alive[dying] = False
             self.velocity[dying] = 0.0
             self.pressure[dying] = 0.0
-        stats.dead = int((~self.alive).sum())
-        lap("correction")
-        return stats
 
     def neighbours(self, rows: np.ndarray, buffer: str | None = None) -> Neighbours:
         """The neighbours within ``search_radius`` of the live particles with ``rows[i]`` ((N,)
@@ -600,7 +649,7 @@ class MPSSolver:
     def poisson_system(
         self,
         dt: float,
-        clock: Callable[[str], None] | None = None,
+        timer: PhaseTimer | None = None,
         reuse: bool = False,
         rows: np.ndarray | None = None,
         start_density: np.ndarray | None = None,
@@ -608,23 +657,39 @@ class MPSSolver:
         """The pressure Poisson equation at the current positions (taken as r*): neighbours,
         number density n* (stored in ``number_density``), free-surface particles (Dirichlet
         p = 0, Eq. F7) and ``A p = b`` over the other live fluid and wall particles (Eq. F8).
-        ``clock`` (if given) is called with the phase names "neighbours" and "assembly".
+        ``timer`` (if given) records the phases "neighbours" and "assembly".
         ``reuse``: the matrix and neighbour list are written into the solver's buffers (as
         :meth:`step` does), valid until the next step or call; otherwise arrays of their own.
         ``rows``: the particles given a neighbour-list row ((N,) bool; :meth:`_wet`), by
         default every live fluid and wall particle; the others are on the free surface.
         ``start_density``: n^k ((N,), the number density at the start of the step), which the
         "either-density" criterion also tests; without it that criterion tests n* alone."""
-        p = self.params
+        if timer is None:
+            timer = PhaseTimer()
         c = self.constants
         # Dummies need no row: they only complete the number density of their neighbours.
         solid = self.alive & (self.kind != DUMMY)
-        nb = self.neighbours(solid if rows is None else rows & solid, "star" if reuse else None)
-        kernels.number_density(
-            nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
-        )
-        if clock is not None:
-            clock("neighbours")
+        with timer("neighbours"):
+            # Neighbours and number density n* at r*, Eq. (F2)
+            nb = self.neighbours(solid if rows is None else rows & solid, "star" if reuse else None)
+            kernels.number_density(
+                nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
+            )
+        with timer("assembly"):
+            # Free surface, Eq. (F7) or (F7b); the other particles are the unknowns
+            surface = self._free_surface(solid, start_density)
+            unknown = solid & ~surface
+            # Matrix A, Eq. (F8), and source b, Eq. (F8)-(F9)
+            matrix, particles = self._poisson_matrix(dt, nb, unknown, reuse)
+            rhs = self.poisson_source(dt, particles, nb)
+        return PoissonSystem(matrix, rhs, unknown, particles, int(surface.sum()), nb)
+
+    def _free_surface(self, solid: np.ndarray, start_density: np.ndarray | None) -> np.ndarray:
+        """The particles of ``solid`` ((N,) bool) on the free surface ((N,) bool) by the
+        ``surface`` criterion, Eq. (F7) or (F7b), from n* (``number_density``), the neighbour
+        counts and, for "either-density", n^k ``start_density``."""
+        p = self.params
+        c = self.constants
         surface = self.number_density < p.beta * c.n0
         if p.surface == "neighbour-count":
             count0 = self.reference["number_density"].count
@@ -632,7 +697,16 @@ class MPSSolver:
         if p.surface == "either-density" and start_density is not None:
             surface |= start_density < p.beta * c.n0  # n^k too (docs/theory/fluid.md F7b)
         surface &= solid
-        unknown = solid & ~surface
+        return surface
+
+    def _poisson_matrix(
+        self, dt: float, nb: Neighbours, unknown: np.ndarray, reuse: bool
+    ) -> tuple[Matrix, np.ndarray]:
+        """The matrix A of Eq. (F8) over the ``unknown`` particles ((N,) bool), and the
+        particle of each row ((n,) int64; rows in the two-block order of :class:`Matrix`).
+        ``reuse``: built in the solver's matrix buffers (see :meth:`poisson_system`)."""
+        p = self.params
+        c = self.constants
         blocks = number_unknowns(
             unknown, self.position, c.re_laplacian, TWO_BLOCK_ROWS, self._row_of
         )
@@ -651,11 +725,7 @@ class MPSSolver:
         elif reuse:
             self._matrix_buffers = (indices, data, spare_indices, spare_data)
         nnz = int(indptr[-1])
-        matrix = Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy())
-        rhs = self.poisson_source(dt, particles, nb)
-        if clock is not None:
-            clock("assembly")
-        return PoissonSystem(matrix, rhs, unknown, particles, int(surface.sum()), nb)
+        return Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy()), particles
 
     def poisson_source(
         self, dt: float, particles: np.ndarray, neighbours: Neighbours
@@ -673,7 +743,7 @@ class MPSSolver:
         kernels.velocity_divergence(
             self.position, self.velocity, self.kind, self.alive, neighbours, c, divergence,
         )  # fmt: skip
-        deviation = (self._scratch[particles] - c.n0) / c.n0
+        deviation = (self._start_number_density[particles] - c.n0) / c.n0
         return -p.density / dt * divergence[particles] + (
             p.mixed_relaxation * p.density / dt**2 * deviation
         )
