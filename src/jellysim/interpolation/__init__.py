@@ -15,14 +15,12 @@ j = 0..N-1 at fraction ``t = j / N`` gets (docs/theory/interpolation.md):
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 
 from jellysim import fields
-
-if TYPE_CHECKING:
-    from jellysim.io.result import Result
+from jellysim.config.schema import Scene
 
 
 def cosine_weight(t: np.ndarray) -> np.ndarray:
@@ -181,8 +179,21 @@ def pulse_period(scene: object) -> float:
     return float(bell.period)
 
 
+class TentacleFrames(Protocol):
+    """What :func:`interpolate_result` reads of a result (:class:`jellysim.io.result.Result`
+    keeps it): its scene, frame times (F,) s, and a field's frames."""
+
+    @property
+    def scene(self) -> Scene: ...
+
+    @property
+    def time(self) -> np.ndarray: ...
+
+    def read(self, field: fields.Field, frames: Any = None) -> np.ndarray: ...
+
+
 def interpolate_result(
-    result: Result,
+    result: TentacleFrames,
     factor: int | None = None,
     lag: float | None = None,
     frames: tuple[int, int] | None = None,
