@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-all lint docs clean venv povray web chromium
+.PHONY: demo test test-all lint docs clean venv povray web chromium tbb
 
 # A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
 # lives in the python3-venv package: installed here when run as root, otherwise named.
@@ -64,6 +64,19 @@ chromium:
 	    echo "note: Chromium is not installed; run 'sudo apt-get install chromium' for the viewer test"; \
 	  fi; }
 
+# Debian's TBB runtime (libtbb12), which Blender, OpenCV and others bring and which Numba would take
+# as its threading layer: the tests run with it installed to show that jellysim avoids it
+# (tests/integration/test_threads.py). Installed here when run as root; otherwise that test skips.
+tbb:
+	@ldconfig -p | grep -q 'libtbb\.so\.12 ' || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing libtbb12 (the threading-layer test)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get install -y -qq --no-install-recommends libtbb12 >/dev/null; \
+	  else \
+	    echo "note: libtbb12 is not installed; the threading-layer test skips it"; \
+	  fi; }
+
 # The main job: simulate the brown-jelly preset, draw its figures and render its movie.
 demo: $(BIN)/jellysim povray web
 	$(BIN)/jellysim run brown-jelly --out $(OUT)/brown-jelly --force
@@ -75,11 +88,11 @@ demo: $(BIN)/jellysim povray web
 	@echo "Movie:   $(OUT)/brown-jelly/render/movie.mp4"
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
-test: $(BIN)/jellysim povray web chromium
+test: $(BIN)/jellysim povray web chromium tbb
 	$(BIN)/python -m pytest -q
 
 # Every test, slow ones included.
-test-all: $(BIN)/jellysim povray web chromium
+test-all: $(BIN)/jellysim povray web chromium tbb
 	$(BIN)/python -m pytest -q --runslow
 
 lint: $(BIN)/jellysim

@@ -9,6 +9,7 @@ Python API (the same powers as the command line)::
         tip_x = r.tentacle_positions[:, 0, -1, 0]
 """
 
+import jellysim._threads  # noqa: F401  (chooses Numba's threading layer before any kernel runs)
 from jellysim._version import __version__
 from jellysim.config import Scene, load_scene, scene_to_toml
 from jellysim.errors import InputError, JellysimError, SimulationUnstable

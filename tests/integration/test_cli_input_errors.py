@@ -98,6 +98,8 @@ FILE_CASES = {
     "syntax-error-at-end": ("bad.toml", "[water]\ngravity = [0, 0,\n", ("bad.toml", "line 2")),
     "not-utf8": ("latin.toml", b'name = "caf\xe9"\n', ("latin.toml",)),
     "directory": ("dir.toml", None, ("dir.toml",)),
+    "binary": ("blob.toml", b"\x00\x01name = 1\n", ("blob.toml", "not a scene file", "binary")),
+    "huge": ("huge.toml", b"# " + b"x" * (1 << 20) + b"\n", ("huge.toml", "larger than 1 MiB")),
 }
 
 
@@ -113,6 +115,11 @@ def test_bad_scene_file(
     else:
         path.write_text(content, encoding="utf-8")
     check_subprocess(tmp_path, ("run", name), named)
+
+
+def test_an_endless_input_is_not_a_scene_file(tmp_path: Path) -> None:
+    """/dev/zero is read no further than a scene file's largest size (issue 24)."""
+    check_subprocess(tmp_path, ("run", "/dev/zero"), ("/dev/zero", "not a scene file"))
 
 
 def test_missing_scene_file(tmp_path: Path) -> None:
@@ -301,3 +308,26 @@ def test_either_density_surface_without_the_mixed_source_is_refused(tmp_path: Pa
         ),
         ("fluid.surface = 'either-density'", "fluid.source = 'mixed'"),
     )  # fmt: skip
+
+
+def test_a_result_without_frames_is_refused_by_its_readers(tmp_path: Path) -> None:
+    """A run stopped before its first frame reached the disk (issue 24): plot, render, export
+    and view say so in one line (exit 2) instead of failing inside."""
+    from jellysim.config import load_scene
+    from jellysim.io.result import ResultWriter
+    from jellysim.simulation import make_loop
+
+    loop = make_loop(load_scene(PRESET, {"duration": 0.1}))
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    ResultWriter(folder / "result.h5", loop.datasets(), loop.attributes("")).close()
+    for args in (
+        ("plot", "empty"),
+        ("render", "empty", "--quality", "draft"),
+        ("export", "empty", "--format", "obj"),
+        ("view", "empty", "--no-browser"),
+    ):
+        proc = jellysim(tmp_path, *args)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert "holds no frames" in proc.stderr and "Traceback" not in proc.stderr, args
+        assert len(proc.stderr.strip().splitlines()) <= 3

@@ -48,3 +48,12 @@ def test_sweep_rejects_bad_values_before_writing(tmp_path):
         assert proc.returncode == 2
         assert len(proc.stderr.strip().splitlines()) <= 3 and "Traceback" not in proc.stderr
         assert not (tmp_path / "figs").exists()
+
+
+def test_an_unreadable_value_is_named_as_the_values_option(tmp_path):
+    """The error names --values, not an internal key (issue 24)."""
+    proc = jellysim(tmp_path, "sweep", "brown-jelly", "--key", "duration", "--values", "a b,[1,")
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "jellysim: error: --values: cannot read the value 'a b' as a TOML value"
+    )

@@ -95,6 +95,7 @@ def test_round_trip_keeps_unset_and_explicit_tentacle_density() -> None:
         ("root_motion.direction=radial", "root_motion.direction", "radial"),
         (" duration = 3 ", "duration", 3),
         ('name="a=b"', "name", "a=b"),
+        ("look.bell_color=#ff9040", "look.bell_color", "#ff9040"),  # docs/rendering.md
     ],
 )
 def test_parse_override(item: str, key: str, value: object) -> None:
@@ -109,7 +110,17 @@ def test_parse_override_reads_nan_and_inf_as_floats() -> None:
     assert parse_override("duration=inf")[1] == math.inf
 
 
-@pytest.mark.parametrize("item", ["duration", "=3", "duration=1.2.3", "name=two words"])
+def test_a_hex_colour_on_the_command_line_is_the_colour() -> None:
+    """``--set look.bell_color=#ff9040`` (docs/rendering.md): TOML would read a comment."""
+    scene = load_scene("brown-jelly", ["look.bell_color=#ff9040"])
+    expected = load_scene("brown-jelly", {"look.bell_color": "#ff9040"}).look.bell_color
+    assert scene.look.bell_color == expected
+    assert expected != load_scene("brown-jelly").look.bell_color
+
+
+@pytest.mark.parametrize(
+    "item", ["duration", "=3", "duration=1.2.3", "name=two words", "look.bell_color=#ff90"]
+)
 def test_parse_override_rejects(item: str) -> None:
     with pytest.raises(InputError):
         parse_override(item)

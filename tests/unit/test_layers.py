@@ -16,7 +16,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "src" / "jellysim"
 FACE = "(package face)"
 
 LAYERS: list[set[str]] = [
-    {"_version", "errors", "fields", "progress", "reference"},  # neutral
+    {"_threads", "_version", "errors", "fields", "progress", "reference"},  # neutral
     {"config", "species"},  # scenes
     {"tentacle", "fluid", "bell", "interpolation"},  # physics and render-time geometry
     {"coupling"},  # bodies joined: the bell in its water, the recorded margin

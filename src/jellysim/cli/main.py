@@ -156,10 +156,10 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from jellysim.config.load import parse_override
+    from jellysim.config.load import parse_value
     from jellysim.studies import plot_sweep, sweep, write_traces_csv
 
-    values = [parse_override(f"v={item}")[1] for item in args.values.split(",") if item.strip()]
+    values = [parse_value(item, "--values") for item in args.values.split(",") if item.strip()]
     if not values:
         raise InputError("--values: give at least one value, e.g. --values 100,2.4e5,9e9")
     traces = sweep(args.scene, args.key, values, args.overrides, args.tentacle)

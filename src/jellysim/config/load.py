@@ -343,35 +343,54 @@ def parse_toml(text: str, source: str) -> Tree:
         raise InputError(f"{source}: TOML syntax error: {detail}") from None
 
 
+# A scene is a few kB of TOML: a file larger than this is not one (``/dev/zero``, a video), and
+# reading it whole would only exhaust the memory.
+MAX_SCENE_BYTES = 1 << 20
+
+
 def read_scene_file(path: str | Path) -> Tree:
-    """Read a TOML scene file into a tree (not yet validated)."""
+    """Read a TOML scene file into a tree (not yet validated); at most MAX_SCENE_BYTES are read."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        with open(p, "rb") as handle:
+            data = handle.read(MAX_SCENE_BYTES + 1)
+        text = data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as err:
         reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
         raise InputError(f"cannot read scene file {quote(str(p))}: {reason}") from None
+    if len(data) > MAX_SCENE_BYTES:
+        raise InputError(
+            f"{quote(str(p))} is not a scene file: it is larger than 1 MiB "
+            "(a scene is a few kB of TOML)"
+        )
+    if "\0" in text:
+        raise InputError(f"{quote(str(p))} is not a scene file: it holds binary data, not TOML")
     return parse_toml(text, str(p))
 
 
+def parse_value(raw: str, option: str) -> Any:
+    """A command-line VALUE: a TOML value, or a bare word or a colour ``#rrggbb`` taken as a
+    string (TOML would read ``#`` as the start of a comment); an error names ``option``."""
+    raw = raw.strip()
+    if re.fullmatch(r"#[0-9A-Fa-f]{6}", raw):
+        return raw
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.+-]*", raw):
+            return raw
+        raise InputError(f"{option}: cannot read the value {raw!r} as a TOML value") from None
+
+
 def parse_override(item: str) -> tuple[str, Any]:
-    """Split ``KEY=VALUE``; VALUE is a TOML value, a bare word is taken as a string."""
+    """Split ``KEY=VALUE``; VALUE as :func:`parse_value` reads it."""
     if "=" not in item:
         raise InputError(f"--set {item!r}: expected KEY=VALUE, e.g. tentacles.youngs_modulus=1e5")
     key, raw = item.split("=", 1)
-    key, raw = key.strip(), raw.strip()
+    key = key.strip()
     if not key:
         raise InputError(f"--set {item!r}: the key is empty")
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.+-]*", raw):
-            value = raw
-        else:
-            raise InputError(
-                f"--set {quote(key)}: cannot read the value {raw!r} as a TOML value"
-            ) from None
-    return key, value
+    return key, parse_value(raw, f"--set {quote(key)}")
 
 
 def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tree:

@@ -423,5 +423,13 @@ class Result:
 
 
 def open_result(folder: str | os.PathLike[str]) -> Result:
-    """Open the result in ``folder`` (or a ``result.h5`` path) for reading."""
-    return Result(folder)
+    """Open the result in ``folder`` (or a ``result.h5`` path) for reading; a result that holds
+    no frame (its run stopped before the first was written) is refused with InputError."""
+    result = Result(folder)
+    if result.frames == 0:
+        result.close()
+        raise InputError(
+            f"'{result.path}' holds no frames: its run stopped before writing the first "
+            "(run the scene again with --force)"
+        )
+    return result
