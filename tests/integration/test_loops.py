@@ -100,21 +100,29 @@ def test_a_sweep_of_a_fluid_only_scene_says_it_has_no_tentacles() -> None:
         sweep("dam-break-2d", "fluid.courant", [0.1], {"fluid.spacing": 0.01})
 
 
-def test_a_checkpoint_without_the_scenes_state_is_refused(tmp_path: Path) -> None:
+class _Stop(Exception):
+    pass
+
+
+def _stopped_run(folder: Path) -> jellysim.Scene:
+    """A run of 7 frames stopped at frame 5 (frames 0-4 written), its checkpoint of frame 4
+    left behind."""
     scene = jellysim.load_scene(
         "forced-tentacles",
         {"duration": 0.2, "tentacles.count": 2, "solver.checkpoint_every": 2},
     )
 
-    class Stop(Exception):
-        pass
-
     def stop(simulation: jellysim.Simulation) -> None:
-        if simulation.frame == 4:
-            raise Stop
+        if simulation.frame == 5:
+            raise _Stop
 
-    with pytest.raises(Stop):
-        jellysim.run(scene, tmp_path, observers=[stop])
+    with pytest.raises(_Stop):
+        jellysim.run(scene, folder, observers=[stop])
+    return scene
+
+
+def test_a_checkpoint_without_the_scenes_state_is_refused(tmp_path: Path) -> None:
+    scene = _stopped_run(tmp_path)
     checkpoint = tmp_path / "checkpoint.npz"
     with np.load(checkpoint) as data:
         kept = {k: data[k] for k in data.files if k != "velocities"}
@@ -125,3 +133,44 @@ def test_a_checkpoint_without_the_scenes_state_is_refused(tmp_path: Path) -> Non
     np.savez(checkpoint, **kept)
     with pytest.raises(InputError, match=r"'velocities' has shape \(3, 3\)"):
         jellysim.run(scene, tmp_path, resume=True)
+
+
+def _truncate(data: bytes) -> bytes:
+    return data[: len(data) // 2]
+
+
+def _flip_a_bit(data: bytes) -> bytes:
+    middle = len(data) // 2
+    return data[:middle] + bytes([data[middle] ^ 0x10]) + data[middle + 1 :]
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [_truncate, lambda data: b"", _flip_a_bit, lambda data: b"not a zip file at all"],
+    ids=["truncated", "empty", "bit-flipped", "not-a-checkpoint"],
+)
+def test_a_damaged_checkpoint_is_refused_with_a_sentence(tmp_path: Path, damage: object) -> None:
+    """Issue 24: the sentence names the checkpoint and --force; nothing is resumed."""
+    scene = _stopped_run(tmp_path)
+    checkpoint = tmp_path / "checkpoint.npz"
+    checkpoint.write_bytes(damage(checkpoint.read_bytes()))  # type: ignore[operator]
+    before = (tmp_path / "result.h5").read_bytes()
+    with pytest.raises(InputError, match=r"checkpoint\.npz is damaged .*--force"):
+        jellysim.run(scene, tmp_path, resume=True)
+    assert (tmp_path / "result.h5").read_bytes() == before
+
+
+@pytest.mark.parametrize("frame", [5, 6, 100, -1])
+def test_a_checkpoint_beyond_the_written_frames_is_refused(tmp_path: Path, frame: int) -> None:
+    """A checkpoint must be of a frame the result holds, before the last: a resume never reports
+    success for an incomplete result (issue 24)."""
+    scene = _stopped_run(tmp_path)
+    checkpoint = tmp_path / "checkpoint.npz"
+    with np.load(checkpoint) as data:
+        assert int(data["frame"]) == 4
+        kept = {k: data[k] for k in data.files}
+    kept["frame"] = np.int64(frame)
+    np.savez(checkpoint, **kept)
+    with pytest.raises(InputError, match=r"is of frame .* holds frames 0-4 of 7.*--force"):
+        jellysim.run(scene, tmp_path, resume=True)
+    assert checkpoint.exists()

@@ -8,6 +8,7 @@ seed and the time (:mod:`jellysim.tentacle.flow`), so it needs no saved generato
 from __future__ import annotations
 
 import os
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -45,8 +46,13 @@ def load_checkpoint(folder: Path, scene_toml: str) -> tuple[int, dict[str, np.nd
             saved_scene = str(data["scene"])
             frame = int(data["frame"])
             state = {k: data[k].copy() for k in data.files if k not in ("frame", "scene")}
-    except (OSError, ValueError, KeyError) as err:
-        raise InputError(f"cannot read checkpoint '{path}': {err}") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
+        # truncated, empty, bit-flipped or not a checkpoint at all
+        detail = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        raise InputError(
+            f"cannot resume '{folder}': {path.name} is damaged ({detail}); "
+            "run with --force to start again"
+        ) from None
     if saved_scene != scene_toml:
         raise scene_mismatch(folder)
     return frame, state

@@ -88,12 +88,19 @@ def run(
         with Result(folder) as existing:
             same_scene = existing.scene_text == scene_toml
             complete = existing.complete
+            written = existing.frames
         if not same_scene:
             raise scene_mismatch(folder)
         if complete:
             log.info("%s is complete; nothing to resume", result_path)
             return Result(folder)
         frame, state = load_checkpoint(folder, scene_toml)
+        if not 0 <= frame < min(written, scene.frame_count - 1):
+            raise InputError(
+                f"cannot resume '{folder}': {CHECKPOINT_FILE} is of frame {frame}, but "
+                f"{RESULT_FILE} holds frames 0-{written - 1} of {scene.frame_count}; "
+                "run with --force to start again"
+            )
         _check_state(folder, loop, state)
         loop.restore(frame, state)
         kept = read_frames(result_path, loop.datasets(), frame + 1)
