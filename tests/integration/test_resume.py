@@ -283,3 +283,46 @@ def test_api_resume_after_an_aborted_run_is_bitwise_identical(tmp_path: Path) ->
         assert r.frames == scene.frame_count
     jellysim.run(scene, tmp_path / "reference").close()
     _assert_same_result(tmp_path / "aborted", tmp_path / "reference")
+
+
+def test_one_writer_per_folder_and_a_killed_run_leaves_no_lock(tmp_path: Path) -> None:
+    """Issue 24: while a run writes a folder, a second run, --resume or --force on it is refused
+    (exit 2); once the writer is SIGKILLed, the folder is free again."""
+    out = tmp_path / "run"
+    long = [*SLOW, f"duration={20 * DURATION}"]  # outlasts the refused attempts
+    process = subprocess.Popen(
+        _command(out, long), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline = time.monotonic() + 300.0
+        while _checkpoint_frame(out) is None:
+            assert process.poll() is None, "the run ended before the test could race it"
+            assert time.monotonic() < deadline, "no checkpoint within 300 s"
+            time.sleep(0.01)
+        _assert_invalid_input(_jellysim(out, long))  # a plain run: the result exists
+        for extra in ("--force", "--resume"):
+            done = _jellysim(out, long, extra)
+            assert process.poll() is None, "the first run ended while the others were refused"
+            _assert_invalid_input(done)
+            assert "being written by another jellysim run" in done.stderr
+        os.kill(process.pid, signal.SIGKILL)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate()
+    again = _jellysim(out, SLOW, "--force")
+    assert again.returncode == 0, again.stderr
+    with jellysim.open_result(out) as r:
+        assert r.complete
+
+
+def test_the_writer_lock_refuses_in_process_too(tmp_path: Path) -> None:
+    from jellysim.io.folders import writing_lock
+
+    scene = jellysim.load_scene("brown-jelly", {"duration": 0.1})
+    tmp_path.mkdir(exist_ok=True)
+    with writing_lock(tmp_path):
+        with pytest.raises(jellysim.InputError, match="being written by another jellysim run"):
+            jellysim.run(scene, tmp_path)
+        assert not (tmp_path / "result.h5").exists()
+    jellysim.run(scene, tmp_path).close()  # released

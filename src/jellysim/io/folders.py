@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from jellysim.errors import InputError
@@ -18,3 +21,23 @@ def output_folder(folder: Path, option: str = "--out") -> Path:
     if not os.access(folder, os.W_OK):
         raise InputError(f"{option} {folder}: the folder is not writable")
     return folder
+
+
+@contextmanager
+def writing_lock(folder: Path) -> Iterator[None]:
+    """Hold ``folder``'s writer lock while the block runs: one jellysim run writes a folder at a
+    time. The lock is an flock on the folder itself, so no file is left behind, and the kernel
+    releases it when the process ends, killed or not. Raises InputError if another run holds it.
+    """
+    descriptor = os.open(folder, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(
+                f"'{folder}' is being written by another jellysim run: wait for it to end, "
+                "or choose another --out"
+            ) from None
+        yield
+    finally:
+        os.close(descriptor)  # releases the lock

@@ -21,10 +21,10 @@ from jellysim.io.checkpoint import (
     save_checkpoint,
     scene_mismatch,
 )
-from jellysim.io.folders import output_folder
+from jellysim.io.folders import output_folder, writing_lock
 from jellysim.io.result import RESULT_FILE, Result, read_frames
 from jellysim.progress import progress
-from jellysim.simulation.loop import FrameLoop, Observer, make_loop
+from jellysim.simulation.loop import FrameLoop, Observer, Simulation, make_loop
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +84,17 @@ def run(
 
     loop = make_loop(scene)
     loop.observers.extend(observers or [])
+    if not resume:
+        output_folder(folder)
+    with writing_lock(folder):
+        return _run(loop, scene, folder, scene_toml, resume, quiet)
+
+
+def _run(
+    loop: Simulation, scene: Scene, folder: Path, scene_toml: str, resume: bool, quiet: bool
+) -> Result:
+    """The run itself, the folder's writer lock held."""
+    result_path = folder / RESULT_FILE
     if resume:
         with Result(folder) as existing:
             same_scene = existing.scene_text == scene_toml
