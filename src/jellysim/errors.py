@@ -27,3 +27,14 @@ class SimulationUnstable(JellysimError):
         super().__init__(message)
         self.time = time
         self.tentacle = tentacle
+
+
+class RunInterrupted(JellysimError):
+    """A run stopped by SIGINT (Ctrl-C) or SIGTERM at a frame boundary, with a checkpoint there:
+    ``--resume`` continues it. Exit status 128 + the signal's number (130, 143), the shell's
+    convention."""
+
+    def __init__(self, message: str, *, signal_number: int, frame: int) -> None:
+        super().__init__(message)
+        self.exit_status = 128 + signal_number
+        self.frame = frame

@@ -326,3 +326,38 @@ def test_the_writer_lock_refuses_in_process_too(tmp_path: Path) -> None:
             jellysim.run(scene, tmp_path)
         assert not (tmp_path / "result.h5").exists()
     jellysim.run(scene, tmp_path).close()  # released
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stop_signal_ends_the_run_at_a_frame_with_a_checkpoint(
+    tmp_path: Path, stop: signal.Signals
+) -> None:
+    """Issue 24: Ctrl-C (SIGINT) or SIGTERM ends a run at the next frame boundary: every frame
+    written, a checkpoint of the last, one line saying how to resume, exit status 128 + the
+    signal; the command it gives continues the run bit for bit."""
+    out = tmp_path / "stopped"
+    process = subprocess.Popen(
+        _command(out, SLOW), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 300.0
+    while _written_frames(out) < 2:
+        assert process.poll() is None, "the run ended before the signal"
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    process.send_signal(stop)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 128 + stop, stderr
+    assert stdout == "" and len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr
+    assert stderr.startswith(f"jellysim: stopped by {stop.name} at t = ")
+    frames = _written_frames(out)
+    assert 2 <= frames < FRAMES
+    assert _checkpoint_frame(out) == frames - 1
+    resume = stderr.split("'")[1]
+    assert resume == f"jellysim run {out / 'scene.toml'} --out {out} --resume"
+    done = subprocess.run(
+        [sys.executable, "-m", *resume.split()], capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stderr
+    reference = tmp_path / "reference"
+    assert _jellysim(reference, SLOW).returncode == 0
+    _assert_same_result(out, reference)

@@ -10,7 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from jellysim.errors import InputError, JellysimError, SimulationUnstable
+from jellysim.errors import InputError, JellysimError, RunInterrupted, SimulationUnstable
 
 
 class _Parser(argparse.ArgumentParser):
@@ -300,6 +300,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         return COMMANDS[args.command](args)
+    except RunInterrupted as err:
+        print(f"jellysim: stopped by {err}", file=sys.stderr)
+        return err.exit_status
     except SimulationUnstable as err:
         print(f"jellysim: {err}", file=sys.stderr)
         print("jellysim: every frame written before stays readable", file=sys.stderr)

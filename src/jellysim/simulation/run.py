@@ -5,15 +5,18 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from jellysim.config import Scene, load_scene, scene_to_toml
-from jellysim.errors import InputError
+from jellysim.errors import InputError, RunInterrupted
 from jellysim.io.checkpoint import (
     CHECKPOINT_FILE,
     load_checkpoint,
@@ -29,6 +32,7 @@ from jellysim.simulation.loop import FrameLoop, Observer, Simulation, make_loop
 log = logging.getLogger(__name__)
 
 SCENE_FILE = "scene.toml"
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def default_out(scene: Scene) -> Path:
@@ -90,6 +94,32 @@ def run(
         return _run(loop, scene, folder, scene_toml, resume, quiet)
 
 
+@contextmanager
+def _stop_signals() -> Iterator[list[int]]:
+    """While the block runs, SIGINT and SIGTERM are recorded (the list gets the signal's number)
+    instead of raised inside a compiled kernel, so the run stops at the next frame boundary.
+    Outside the main thread, where Python cannot take signals, nothing changes."""
+    received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def record(number: int, _frame: object) -> None:
+        received.append(number)
+
+    previous = {number: signal.signal(number, record) for number in STOP_SIGNALS}
+    try:
+        yield received
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _scene_argument(folder: Path) -> str:
+    """What to name the scene on a resume's command line: the run's resolved scene file."""
+    return str(folder / SCENE_FILE)
+
+
 def _run(
     loop: Simulation, scene: Scene, folder: Path, scene_toml: str, resume: bool, quiet: bool
 ) -> Result:
@@ -126,18 +156,28 @@ def _run(
     log.info("%s: %s, %d frames -> %s", scene.name, loop.describe(), scene.frame_count, result_path)
     every = scene.solver.checkpoint_every
     try:
-        start = time.perf_counter()
-        loop.prepare()
-        log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
-        total, done = scene.frame_count - 1, loop.frame
-        with progress(total, done, quiet, "simulating", delay=2.0) as bar:
-            while loop.frame < scene.frame_count - 1:
-                loop.step_frame()
-                writer.append(loop.frame_values())
-                if loop.frame % every == 0:
-                    writer.flush()  # the checkpoint's frame must be on disk first
-                    save_checkpoint(folder, loop.frame, scene_toml, loop.checkpoint_state())
-                bar.update(1)
+        with _stop_signals() as stop:
+            start = time.perf_counter()
+            loop.prepare()
+            log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
+            total, done = scene.frame_count - 1, loop.frame
+            with progress(total, done, quiet, "simulating", delay=2.0) as bar:
+                while loop.frame < scene.frame_count - 1:
+                    loop.step_frame()
+                    writer.append(loop.frame_values())
+                    last = loop.frame == scene.frame_count - 1
+                    if (loop.frame % every == 0 or stop) and not last:
+                        writer.flush()  # the checkpoint's frame must be on disk first
+                        save_checkpoint(folder, loop.frame, scene_toml, loop.checkpoint_state())
+                    bar.update(1)
+                    if stop and not last:
+                        raise RunInterrupted(
+                            f"{signal.Signals(stop[0]).name} at t = {loop.time:.6g} s: frames "
+                            f"0-{loop.frame} are written, with a checkpoint; continue with "
+                            f"'jellysim run {_scene_argument(folder)} --out {folder} --resume'",
+                            signal_number=stop[0],
+                            frame=loop.frame,
+                        )
     finally:
         writer.close()
     loop.finish()
