@@ -4,7 +4,7 @@ without other work on the cores.
     .venv/bin/python benchmarks/bench_threads.py [--scene dam-break-2d] [--set KEY=VALUE ...]
         [--layer omp --layer workqueue --layer tbb] [--load 0 --load 2] [--timeout 300]
 
-Each run is a fresh process (``python -m jellysim run SCENE --quiet``) with
+Each run is a fresh process (``python -m jellysim run SCENE``) with
 ``NUMBA_THREADING_LAYER`` set to the layer; ``--load N`` starts N busy processes (pure Python
 loops) for the run's duration, as other work sharing the machine. Reported per run: the wall time
 to the "wrote" line, the time from it to the process's exit (TBB's finalization hang shows here),
@@ -42,7 +42,7 @@ def run(scene: str, sets: list[str], layer: str, load: int, timeout: float) -> s
     for worker in workers:
         worker.start()
     with tempfile.TemporaryDirectory() as out:
-        command = [sys.executable, "-m", "jellysim", "run", scene, "--out", out, "--quiet"]
+        command = [sys.executable, "-m", "jellysim", "run", scene, "--out", out]
         for item in sets:
             command += ["--set", item]
         start = time.monotonic()

@@ -83,7 +83,7 @@ def test_a_run_exits_within_seconds_of_writing_its_result(tmp_path: Path) -> Non
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_THREADING_LAYER")}
     command = [
         sys.executable, "-m", "jellysim", "run", "dam-break-2d", "--out", str(tmp_path),
-        "--set", "fluid.spacing=0.01", "--set", "duration=0.02", "--quiet",
+        "--set", "fluid.spacing=0.01", "--set", "duration=0.02",
     ]  # fmt: skip
     process = subprocess.Popen(
         command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
