@@ -16,7 +16,7 @@ from jellysim.tentacle.kernels import (
 )
 from jellysim.tentacle.model import (
     SPAN_CUBED,
-    bending_matrix,
+    bending_bands,
     bending_stiffness,
     build_chain_model,
     effective_bending_rigidity,
@@ -67,11 +67,54 @@ def test_internal_forces_sum_to_zero(clamped):
     np.testing.assert_allclose(forces.sum(axis=0), 0.0, atol=1e-12)
 
 
+def dense_bending_matrix(particles, clamped):
+    """The slow oracle: K (P, P) summed stencil by stencil, Eq. (T3)."""
+    k = np.zeros((particles, particles))
+    stencil = np.array([1.0, -2.0, 1.0])
+    for i in range(1, particles - 1):
+        k[i - 1 : i + 2, i - 1 : i + 2] += 0.25 * np.outer(stencil, stencil)
+    if clamped:
+        k[0:2, 0:2] += 0.5 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    return k
+
+
+def from_bands(particles, clamped):
+    diagonal, first, second = bending_bands(particles, clamped)
+    return (
+        np.diag(diagonal)
+        + np.diag(first, 1)
+        + np.diag(first, -1)
+        + np.diag(second, 2)
+        + np.diag(second, -2)
+    )
+
+
+@pytest.mark.parametrize("particles", [3, 4, 5, 12, 60])
+@pytest.mark.parametrize("clamped", [True, False])
+def test_bending_bands_are_the_dense_matrix_exactly(particles, clamped):
+    np.testing.assert_array_equal(
+        from_bands(particles, clamped), dense_bending_matrix(particles, clamped)
+    )
+
+
+def test_the_largest_chain_allocates_no_square_matrix():
+    """tentacles.particles = 100,000 (the documented maximum): a dense K would take 75 GiB
+    (issue 24); the bands and the model take O(P)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    model = build_chain_model(100_000, 0.001, 1e5, 1000.0)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert model.stiffness_diag.shape == (99_999,)
+    assert peak < 50 * 2**20  # bytes: a few arrays of 100,000 floats
+
+
 def test_bending_matrix_matches_the_force():
     rng = np.random.default_rng(9)
     x = random_chain(rng)
     for clamped in (True, False):
-        k = bending_matrix(x.shape[0], clamped)
+        k = from_bands(x.shape[0], clamped)
         assert np.allclose(k, k.T)
         forces = np.empty_like(x)
         bending_forces(x, 1.0, clamped, DOWN, forces)

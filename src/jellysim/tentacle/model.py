@@ -37,20 +37,30 @@ def effective_bending_rigidity(youngs_modulus: float, diameter: float, bending: 
     return bending_stiffness(youngs_modulus, diameter, bending) * diameter**3 / 4.0
 
 
-def bending_matrix(particles: int, clamped: bool) -> np.ndarray:
-    """Dimensionless K (P, P) with bending force ``-c K x`` per coordinate, Eq. (T3).
+def bending_bands(particles: int, clamped: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bands of the dimensionless K (P, P), bending force ``-c K x`` per coordinate,
+    Eq. (T3): its diagonal (P,), first (P-1,) and second (P-2,) off-diagonals. K is never formed:
+    its memory would grow as P^2 (75 GiB at the largest ``tentacles.particles``).
 
     K = (1/4) sum_i s_i s_i^T over interior particles with the stencil s_i = (1, -2, 1) at
     (i-1, i, i+1); a clamped root adds (1/2) s_c s_c^T with s_c = (-1, 1) at (0, 1), the isotropic
-    part of the clamp term (its rank-one part along t is applied in the kernel).
+    part of the clamp term (its rank-one part along t is applied in the kernel). Every entry is a
+    sum of quarters of small integers, exact in floating point.
     """
-    k = np.zeros((particles, particles))
-    stencil = np.array([1.0, -2.0, 1.0])
-    for i in range(1, particles - 1):
-        k[i - 1 : i + 2, i - 1 : i + 2] += 0.25 * np.outer(stencil, stencil)
+    diagonal = np.zeros(particles)
+    first = np.zeros(particles - 1)
+    second = np.zeros(max(particles - 2, 0))
+    interior = np.arange(1, particles - 1)
+    np.add.at(diagonal, interior - 1, 0.25)
+    np.add.at(diagonal, interior, 1.0)
+    np.add.at(diagonal, interior + 1, 0.25)
+    np.add.at(first, interior - 1, -0.5)
+    np.add.at(first, interior, -0.5)
+    second[interior - 1] += 0.25
     if clamped:
-        k[0:2, 0:2] += 0.5 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-    return k
+        diagonal[:2] += 0.5
+        first[0] -= 0.5
+    return diagonal, first, second
 
 
 def build_chain_model(
@@ -77,18 +87,17 @@ def build_chain_model(
     if not free_root:
         inverse_mass[0] = 0.0  # the root is prescribed
     clamped = root == "clamped"
-    k = bending_matrix(particles, clamped)
+    diagonal, off1, off2 = bending_bands(particles, clamped)
     first = 0 if free_root else 1
-    free = k[first:, first:]
     n = particles - first
     return ChainModel(
         mass=mass,
         inverse_mass=inverse_mass,
         volume=volume,
-        stiffness_diag=np.ascontiguousarray(np.diag(free)),
-        stiffness_off1=np.concatenate([np.diag(free, 1), np.zeros(1)])[:n].copy(),
-        stiffness_off2=np.concatenate([np.diag(free, 2), np.zeros(2)])[:n].copy(),
-        root_coupling=np.array([k[1, 0], k[2, 0] if particles > 2 else 0.0]),
+        stiffness_diag=diagonal[first:].copy(),
+        stiffness_off1=np.concatenate([off1[first:], np.zeros(1)])[:n].copy(),
+        stiffness_off2=np.concatenate([off2[first:], np.zeros(2)])[:n].copy(),
+        root_coupling=np.array([off1[0], off2[0] if particles > 2 else 0.0]),
         bending_stiffness=bending_stiffness(youngs_modulus, spacing, bending),
         clamped=clamped,
         spacing=float(spacing),
