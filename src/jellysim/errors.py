@@ -38,3 +38,15 @@ class RunInterrupted(JellysimError):
         super().__init__(message)
         self.exit_status = 128 + signal_number
         self.frame = frame
+
+
+class OutputError(JellysimError):
+    """The machine refused the run's output while it ran (exit status 4): the disk filled, the
+    folder turned read-only, ``result.h5`` was deleted or replaced under the run. The frames
+    written before stay readable and the message names them and the way to continue."""
+
+    exit_status = 4
+
+    def __init__(self, message: str, *, frames: int) -> None:
+        super().__init__(message)
+        self.frames = frames

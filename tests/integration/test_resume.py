@@ -10,10 +10,16 @@ import sys
 import time
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 import scenes
+from faultkit import assert_invalid_input as _assert_invalid_input
+from faultkit import assert_same_result as _assert_same_result
+from faultkit import checkpoint_frame as _checkpoint_frame
+from faultkit import datasets as _datasets
+from faultkit import jellysim_run as _jellysim
+from faultkit import run_command as _command
+from faultkit import written_frames as _written_frames
 
 import jellysim
 from jellysim import fields
@@ -35,84 +41,12 @@ SLOW = [
 FRAMES = round(DURATION * FPS) + 1
 
 
-def _sets(overrides: list[str]) -> list[str]:
-    return [arg for item in overrides for arg in ("--set", item)]
-
-
-def _command(
-    out: Path, overrides: list[str], *extra: str, preset: str = "brown-jelly"
-) -> list[str]:
-    return [
-        sys.executable, "-m", "jellysim", "run", preset,
-        "--out", str(out), "--quiet", *_sets(overrides), *extra,
-    ]  # fmt: skip
-
-
-def _jellysim(
-    out: Path, overrides: list[str], *extra: str, preset: str = "brown-jelly"
-) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        _command(out, overrides, *extra, preset=preset), capture_output=True, text=True, timeout=600
-    )
-
-
-def _datasets(folder: Path) -> dict[str, np.ndarray]:
-    found: dict[str, np.ndarray] = {}
-    with jellysim.open_result(folder) as r:
-
-        def visit(name: str, obj: object) -> None:
-            if isinstance(obj, h5py.Dataset):
-                found[name] = obj[()]
-
-        r.file.visititems(visit)
-    return found
-
-
-def _attributes(folder: Path) -> dict[str, object]:
-    with jellysim.open_result(folder) as r:
-        return {k: r.file.attrs[k] for k in r.file.attrs}
-
-
 def _digest(path: Path) -> tuple[str, int]:
     return hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime_ns
 
 
 def _fingerprint(folder: Path) -> dict[str, tuple[str, int]]:
     return {p.name: _digest(p) for p in sorted(folder.iterdir()) if p.is_file()}
-
-
-def _assert_invalid_input(done: subprocess.CompletedProcess[str]) -> None:
-    assert done.returncode == 2, done.stderr
-    assert "Traceback" not in done.stderr
-    assert 1 <= len(done.stderr.strip().splitlines()) <= 3, done.stderr
-    assert done.stdout == ""
-
-
-def _assert_same_result(a: Path, b: Path) -> None:
-    left, right = _datasets(a), _datasets(b)
-    assert left.keys() == right.keys()
-    for name in left:
-        assert left[name].dtype == right[name].dtype, name
-        assert np.array_equal(left[name], right[name]), f"{name} differs from the reference run"
-    assert _attributes(a).keys() == _attributes(b).keys()
-    for key, value in _attributes(a).items():
-        assert np.array_equal(value, _attributes(b)[key]), f"attribute {key} differs"
-
-
-def _checkpoint_frame(folder: Path) -> int | None:
-    try:
-        with np.load(folder / "checkpoint.npz") as checkpoint:
-            return int(checkpoint["frame"])
-    except (OSError, ValueError, KeyError, EOFError):
-        return None  # none yet
-
-
-def _written_frames(folder: Path) -> int:
-    try:
-        with jellysim.open_result(folder) as r:
-            return r.frames
-    except (jellysim.InputError, OSError):
-        return 0  # the writer is (re)creating the file
 
 
 def _kill_mid_run(

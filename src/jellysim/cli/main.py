@@ -6,11 +6,18 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from jellysim.errors import InputError, JellysimError, RunInterrupted, SimulationUnstable
+from jellysim.errors import (
+    InputError,
+    JellysimError,
+    OutputError,
+    RunInterrupted,
+    SimulationUnstable,
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -310,9 +317,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except JellysimError as err:
         print(f"jellysim: error: {err}", file=sys.stderr)
         return err.exit_status
-    except KeyboardInterrupt:
-        print("jellysim: interrupted", file=sys.stderr)
-        return 1
+    except KeyboardInterrupt:  # Ctrl-C outside a run's frame loop (a run stops at a frame)
+        print("jellysim: stopped by SIGINT", file=sys.stderr)
+        return 128 + signal.SIGINT
+    except OSError as err:
+        if os.environ.get("JELLYSIM_DEBUG"):
+            raise
+        if err.errno is None:  # HDF5's own error: a file it reads is damaged (input, status 2)
+            print(f"jellysim: error: a result does not read, it is damaged: {err}", file=sys.stderr)
+            return InputError.exit_status
+        # The machine refused a file (disk full, read-only): one sentence.
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"jellysim: error: {where}{err.strerror or err}", file=sys.stderr)
+        return OutputError.exit_status
     except Exception as err:  # one line, no traceback, unless asked for
         if os.environ.get("JELLYSIM_DEBUG"):
             raise

@@ -1,17 +1,24 @@
-"""The result store: ``result.h5`` (layout in DESIGN §3), written frame by frame in HDF5 SWMR mode.
+"""The result store: ``result.h5`` (layout in DESIGN §3), written frame by frame.
 
-Frames are appended in batches, each flushed to disk before its frames count as written, so a
-run killed at any moment (SIGKILL included) leaves a file holding every reported frame. The
-length of ``time`` is the number of frames written (it is extended last in each batch); other
-per-frame datasets of a killed run may hold a few rows more, which readers ignore. A file
-whose writer was killed still carries HDF5's "open for writing" flag: jellysim's own reader
-opens it (in SWMR read mode); other tools need ``h5clear -s result.h5`` (Debian package
-hdf5-tools) first, or a ``jellysim run --resume``, which rewrites it cleanly.
+Frames are appended in batches, each flushed to disk before its frames count as written. The
+file is plain HDF5 (the 1.8 format, neither SWMR nor HDF5's file lock: the folder's writer lock
+keeps other writers out), so a run killed at any moment (SIGKILL included) leaves a file that
+h5py, xarray, ParaView and every HDF5 tool open as it is, holding every reported frame. Between
+flushes HDF5 keeps the file's index in memory, so the file on disk stays as the last flush left
+it. ``time`` is extended last in each batch and a reader counts the frames every per-frame
+dataset holds (:attr:`Result.frames`). Chunks carry Fletcher-32 checksums, so a damaged chunk
+is an error, never silently wrong numbers. Disk full, a read-only folder, or ``result.h5``
+deleted or replaced while the run writes it stop the run with :class:`OutputError`, the frames
+already on disk kept (a deleted file is written back from the run's open copy).
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import os
+import shutil
+import struct
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,13 +29,23 @@ import h5py
 import numpy as np
 
 from jellysim import fields
-from jellysim.errors import InputError
+from jellysim.errors import InputError, OutputError
 from jellysim.fields import Dataset, Field
 
 RESULT_FILE = "result.h5"
 
 # Which frames to read: one (int), a slice (step >= 1), or increasing indices.
 Frames = int | slice | Sequence[int]
+
+# The HDF5 format written: 1.8's, which every HDF5 reader of the last fifteen years opens and
+# which carries no "open for writing" flag that a killed writer would leave set.
+LIBVER = ("earliest", "v108")
+
+# Room kept free on the output's file system beyond a batch's own bytes (HDF5's index, the
+# checkpoint): a batch that would not fit with this margin is not started.
+FREE_SPACE_MARGIN = 4 * 2**20
+# Disk reserved for a batch beyond its frames' bytes: HDF5's index grows a little with each.
+RESERVE_MARGIN = 2**20
 
 
 def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[Dataset]:
@@ -46,12 +63,47 @@ def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[D
     ]
 
 
+_LIBC = ctypes.CDLL(None, use_errno=True)
+_FALLOCATE = getattr(_LIBC, "fallocate", None)  # Linux
+if _FALLOCATE is not None:
+    _FALLOCATE.argtypes = (ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64)
+FALLOC_FL_KEEP_SIZE = 1
+
+
+def _reserve(descriptor: int, length: int) -> None:
+    """Allocate ``length`` bytes of disk past the end of the open file, its size unchanged
+    (Linux ``fallocate`` with FALLOC_FL_KEEP_SIZE), so the writes that follow cannot meet a
+    full disk halfway: HDF5, failing a write in a flush, goes on to write an index that points
+    at the data it could not write. Raises OSError (ENOSPC) when the disk has no room; where
+    the file system cannot reserve, nothing is done."""
+    if _FALLOCATE is None:
+        return
+    end = os.fstat(descriptor).st_size
+    if _FALLOCATE(descriptor, FALLOC_FL_KEEP_SIZE, end, length) != 0:
+        number = ctypes.get_errno()
+        if number in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+            raise OSError(number, os.strerror(number))
+
+
+def _os_reason(err: OSError | RuntimeError) -> str:
+    """What the system said, for a sentence; HDF5's own errors name the errno in their text."""
+    if isinstance(err, OSError) and err.errno is not None:
+        return os.strerror(err.errno)
+    text = str(err)
+    for number in (errno.ENOSPC, errno.EROFS, errno.EDQUOT, errno.EIO, errno.EACCES):
+        if f"errno = {number}," in text or os.strerror(number) in text:
+            return os.strerror(number)
+    return text
+
+
 class ResultWriter:
-    """Appends frames to ``result.h5`` in SWMR mode.
+    """Appends frames to ``result.h5``.
 
     Frames are buffered and written in batches (every ``batch_frames`` frames or
     ``batch_seconds`` of wall time, and on :meth:`flush`); ``frames`` counts those flushed to
-    disk, which are the ones reported as written.
+    disk, which are the ones reported as written. A fault of the output (disk full, not
+    writable, the file deleted or replaced) raises :class:`OutputError` from :meth:`flush`;
+    the file then keeps the frames of the last good flush and is written no more.
     """
 
     def __init__(
@@ -71,8 +123,12 @@ class ResultWriter:
         name a per-frame dataset again (an HDF5 hard link: no second copy).
         """
         self.path = path
+        self.frames = 0 if initial is None else int(initial[fields.TIME.path].shape[0])
         temporary = path.with_name(path.name + ".tmp")
-        f = h5py.File(temporary, "w", libver="latest")
+        try:
+            f = h5py.File(temporary, "w", libver=LIBVER, locking=False)
+        except OSError as err:
+            raise self._fault(f"cannot create {temporary.name} ({_os_reason(err)})") from None
         try:
             for spec in datasets:
                 data = None if initial is None else initial[spec.path]
@@ -86,28 +142,37 @@ class ResultWriter:
                     chunks=(chunk_rows, *spec.frame_shape),
                     dtype=spec.dtype,
                     data=data,
+                    fletcher32=True,
                 )
                 ds.attrs["units"] = spec.units
             for name, (array, units) in (static or {}).items():
-                f.create_dataset(name, data=array)
+                f.create_dataset(name, data=array, fletcher32=array.size > 0)
                 f[name].attrs["units"] = units
             for name, target in (links or {}).items():
                 f[name] = f[target]
             for key, value in attributes.items():
                 f.attrs[key] = value
-            f.swmr_mode = True
-            os.replace(temporary, path)  # only now visible, already in SWMR mode (open files move)
+            f.flush()
+            os.replace(temporary, path)  # only now visible, complete (open files move)
+        except OSError as err:
+            _abandon(f)
+            temporary.unlink(missing_ok=True)
+            raise self._fault(f"cannot write {path.name} ({_os_reason(err)})") from None
         except BaseException:
             f.close()
             temporary.unlink(missing_ok=True)
             raise
         self._file = f
+        self._descriptor = int(f.id.get_vfd_handle())
         self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
+        self._frame_bytes = sum(
+            np.dtype(spec.dtype).itemsize * int(np.prod(spec.frame_shape)) for spec in datasets
+        )
         self._buffer: dict[str, list[Any]] = {name: [] for name in self._datasets}
         self._batch_frames = batch_frames
         self._batch_seconds = batch_seconds
         self._last_flush = time.monotonic()
-        self.frames = 0 if initial is None else int(initial[fields.TIME.path].shape[0])
+        self._broken = False
 
     def append(self, values: dict[str, np.ndarray | float]) -> None:
         """Add one frame (every dataset); it reaches the disk with the next flush."""
@@ -120,35 +185,171 @@ class ResultWriter:
         ):
             self.flush()
 
+    def _fault(self, what: str) -> OutputError:
+        written = "no frame is" if self.frames == 0 else f"frames 0-{self.frames - 1} are"
+        return OutputError(
+            f"{self.path.parent}: {what}; {written} written in {self.path.name}",
+            frames=self.frames,
+        )
+
+    def _check_file(self, pending: int) -> None:
+        """At each flush: ``path`` must still be this file, and the disk must have room for the
+        ``pending`` frames."""
+        try:
+            named = os.stat(self.path)
+        except FileNotFoundError:
+            named = None
+        mine = os.fstat(self._descriptor)
+        if named is None or (named.st_ino, named.st_dev) != (mine.st_ino, mine.st_dev):
+            raise self._moved(named is None)
+        if not pending:
+            return
+        free = shutil.disk_usage(self.path.parent).free
+        needed = pending * self._frame_bytes + FREE_SPACE_MARGIN
+        if free < needed:
+            raise self._fault(
+                f"the disk is full ({free / 2**20:.1f} MiB free, the next {pending} frames "
+                f"need {needed / 2**20:.1f} MiB with room for the index)"
+            )
+
+    def _moved(self, deleted: bool) -> OutputError:
+        """``result.h5`` was deleted or replaced under the run: write the run's frames back
+        (the open file still holds them) where they cannot clobber anything."""
+        self._file.flush()
+        target = self.path if deleted else self.path.with_name(self.path.name + ".saved")
+        temporary = target.with_name(target.name + ".tmp")
+        try:
+            with open(f"/proc/self/fd/{self._descriptor}", "rb") as source:
+                with open(temporary, "wb") as copy:
+                    shutil.copyfileobj(source, copy, 2**20)
+            os.replace(temporary, target)
+        except OSError as err:
+            temporary.unlink(missing_ok=True)
+            self._broken = True
+            return self._fault(
+                f"{self.path.name} was {'deleted' if deleted else 'replaced'} while this run "
+                f"wrote it, and its frames could not be saved again ({_os_reason(err)})"
+            )
+        if deleted:
+            what = f"{self.path.name} was deleted while this run wrote it; written back"
+        else:
+            what = (
+                f"{self.path.name} was replaced by another file while this run wrote it (left "
+                f"as it is); the run's own result is saved as {target.name}"
+            )
+        self._broken = True
+        return self._fault(what)
+
     def flush(self) -> None:
-        """Write the buffered frames and flush them to disk."""
+        """Write the buffered frames and flush them to disk (raises :class:`OutputError` when
+        the output refuses them; the frames of earlier flushes stay on disk)."""
+        if self._broken:
+            raise self._fault("the output failed earlier")
         pending = len(self._buffer[fields.TIME.path])
+        self._check_file(pending)
         if pending:
+            try:
+                _reserve(self._descriptor, pending * self._frame_bytes + RESERVE_MARGIN)
+            except OSError as err:
+                raise self._fault(f"cannot write the next frames ({_os_reason(err)})") from None
             start = self.frames
-            # ``time`` goes last: its length is the count of written frames, so a kill in the
-            # middle of a batch leaves the other datasets at least that long, never shorter.
-            for name in sorted(self._datasets, key=lambda name: name == fields.TIME.path):
-                ds = self._datasets[name]
-                ds.resize(start + pending, axis=0)
-                ds[start:] = np.stack(self._buffer[name])
-                self._buffer[name].clear()
-                ds.flush()
-            self._file.flush()
+            try:
+                # ``time`` goes last: its length is the count of written frames, so a kill in
+                # the middle of a batch leaves the other datasets at least that long.
+                for name in sorted(self._datasets, key=lambda name: name == fields.TIME.path):
+                    ds = self._datasets[name]
+                    ds.resize(start + pending, axis=0)
+                    ds[start:] = np.stack(self._buffer[name])
+                    self._buffer[name].clear()
+                self._file.flush()
+            except (OSError, RuntimeError) as err:  # h5py raises either for a failed write
+                # HDF5 would write its half-updated index on close: the file is left as the
+                # last good flush wrote it.
+                _abandon(self._file)
+                self._broken = True
+                raise self._fault(f"cannot write the next frames ({_os_reason(err)})") from None
             self.frames = start + pending
         self._last_flush = time.monotonic()
 
-    def close(self) -> None:
-        """Flush what is buffered and close the file."""
-        if self._file.id.valid:
+    def close(self, discard: bool = False) -> None:
+        """Flush what is buffered and close the file; ``discard``: drop the frames not yet
+        flushed instead (after an output fault). After a failed write: only let go of it."""
+        if not self._file.id.valid:
+            return
+        if self._broken:
+            _abandon(self._file)
+            return
+        if discard:
+            for buffer in self._buffer.values():
+                buffer.clear()
+        try:
             self.flush()
-            self._file.close()
+        finally:
+            if self._file.id.valid and not self._broken:
+                self._file.close()
+
+
+def _abandon(f: h5py.File) -> None:
+    """Let go of an HDF5 file without writing to it again: its descriptor is pointed at an
+    anonymous file in memory first, so the close writes its half-updated index there instead
+    of over the last good flush (and succeeds: a close whose writes fail leaves HDF5 to crash
+    at exit)."""
+    try:
+        descriptor = int(f.id.get_vfd_handle())
+        make = getattr(os, "memfd_create", None)
+        scratch = make("abandoned-result") if make else os.open(os.devnull, os.O_RDONLY)
+        try:
+            os.dup2(scratch, descriptor)
+        finally:
+            os.close(scratch)
+    except (OSError, ValueError, RuntimeError):
+        pass
+    try:
+        f.close()
+    except (OSError, RuntimeError):
+        pass
+
+
+# The superblock's end-of-file address: its byte offset by superblock version (HDF5 file format
+# specification, "Superblock"); offsets are 8 bytes in the files h5py writes.
+_EOF_OFFSET = {0: 40, 1: 44, 2: 28, 3: 28}
+_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _check_not_truncated(path: Path) -> None:
+    """Refuse, in a sentence, a file shorter than its own superblock says (a copy cut short):
+    HDF5 would otherwise retry reading it for minutes in SWMR mode."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(64)
+            size = os.fstat(handle.fileno()).st_size
+    except OSError as err:
+        raise InputError(f"cannot read '{path}' ({_os_reason(err)})") from None
+    if not head.startswith(_SIGNATURE):
+        raise InputError(f"'{path}' is not a result: not an HDF5 file (damaged, or another file)")
+    version = head[8]
+    offset = _EOF_OFFSET.get(version)
+    if offset is None or len(head) < offset + 8 or head[13 if version < 2 else 9] != 8:
+        return  # a layout this check does not know: HDF5's own checks apply
+    (end,) = struct.unpack_from("<Q", head, offset)
+    if end > size:
+        raise InputError(
+            f"'{path}' is truncated: it holds {size:,} of its {end:,} bytes (a copy cut short?); "
+            "copy it again, or run the scene again"
+        )
 
 
 def _open(path: Path) -> h5py.File:
+    _check_not_truncated(path)
+    # HDF5's default file locking, as plain h5py uses: one process may then open the file
+    # both ways (HDF5 refuses a second open with other locking flags). The writer takes no lock.
     try:
         return h5py.File(path, "r")
-    except OSError:
-        # A run killed while writing leaves the SWMR "open for writing" flag set.
+    except OSError as err:
+        if "already open for write" not in str(err):
+            raise
+        # A killed run of an older jellysim (which wrote in SWMR mode) left SWMR's "open for
+        # writing" flag set: SWMR read mode opens that file (its length was checked above).
         return h5py.File(path, "r", swmr=True)
 
 
@@ -193,9 +394,12 @@ class Result:
         try:
             self.file = _open(path)
         except OSError as err:
-            raise InputError(f"cannot open '{path}': {err}") from None
+            raise InputError(
+                f"'{path}' does not open as a result ({err}): it is damaged or not a result"
+            ) from None
         self.path = path
         self.folder = path.parent
+        self._frames: int | None = None
 
     def __enter__(self) -> Result:
         return self
@@ -234,6 +438,15 @@ class Result:
         of them (an index drops the frame axis; a slice or increasing indices keep it); a static
         field whole. Raises :class:`InputError` when the result has no such dataset, IndexError
         for a frame not written."""
+        try:
+            return self._read(field, frames)
+        except OSError as err:
+            raise InputError(
+                f"'{self.path}' is damaged: {field.path} does not read ({err}); "
+                "run the scene again (or copy the result again)"
+            ) from None
+
+    def _read(self, field: Field, frames: Frames | None) -> np.ndarray:
         data = self.dataset(field)
         if not field.per_frame:
             if frames is not None:
@@ -255,8 +468,15 @@ class Result:
 
     @property
     def frames(self) -> int:
-        """Frames written (the length of ``time``)."""
-        return int(self.file[fields.TIME.path].shape[0])
+        """Frames written: the rows every per-frame dataset holds (``time`` is extended last
+        in each batch, so a run killed mid-batch leaves other datasets a few rows longer)."""
+        if self._frames is None:
+            self._frames = min(
+                int(self.file[field.path].shape[0])
+                for field in fields.FIELDS
+                if field.per_frame and field.path in self.file
+            )
+        return self._frames
 
     # Per-frame arrays, (F, ...).
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from jellysim.config import Scene, load_scene, scene_to_toml
-from jellysim.errors import InputError, RunInterrupted
+from jellysim.errors import InputError, OutputError, RunInterrupted
 from jellysim.io.checkpoint import (
     CHECKPOINT_FILE,
     load_checkpoint,
@@ -86,12 +86,14 @@ def run(
     if resume and not result_path.exists():
         raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
 
-    loop = make_loop(scene)
-    loop.observers.extend(observers or [])
-    if not resume:
-        output_folder(folder)
-    with writing_lock(folder):
-        return _run(loop, scene, folder, scene_toml, resume, quiet)
+    # From here a stop signal ends the run at the next frame boundary (setting up included).
+    with _stop_signals() as stop:
+        loop = make_loop(scene)
+        loop.observers.extend(observers or [])
+        if not resume:
+            output_folder(folder)
+        with writing_lock(folder):
+            return _run(loop, scene, folder, scene_toml, resume, quiet, stop)
 
 
 @contextmanager
@@ -115,13 +117,47 @@ def _stop_signals() -> Iterator[list[int]]:
             signal.signal(number, handler)
 
 
+def _checkpoint(folder: Path, loop: FrameLoop, scene_toml: str, written: int) -> None:
+    """Save the state after the loop's frame; an output that refuses it is an OutputError (the
+    previous checkpoint, written atomically, stays)."""
+    try:
+        save_checkpoint(folder, loop.frame, scene_toml, loop.checkpoint_state())
+    except OSError as err:
+        (folder / (CHECKPOINT_FILE + ".tmp")).unlink(missing_ok=True)
+        raise OutputError(
+            f"{folder}: cannot write {CHECKPOINT_FILE} ({err.strerror or err}); frames "
+            f"0-{written - 1} are written in {RESULT_FILE}",
+            frames=written,
+        ) from None
+
+
+def _way_on(folder: Path) -> str:
+    """How to continue a run the output stopped: from its checkpoint, or again from the start."""
+    try:
+        resumable = (folder / CHECKPOINT_FILE).is_file()
+    except OSError:
+        resumable = False
+    if resumable:
+        return (
+            f"; once that is mended, continue with "
+            f"'jellysim run {_scene_argument(folder)} --out {folder} --resume'"
+        )
+    return "; once that is mended, run the scene again with --force"
+
+
 def _scene_argument(folder: Path) -> str:
     """What to name the scene on a resume's command line: the run's resolved scene file."""
     return str(folder / SCENE_FILE)
 
 
 def _run(
-    loop: Simulation, scene: Scene, folder: Path, scene_toml: str, resume: bool, quiet: bool
+    loop: Simulation,
+    scene: Scene,
+    folder: Path,
+    scene_toml: str,
+    resume: bool,
+    quiet: bool,
+    stop: list[int],
 ) -> Result:
     """The run itself, the folder's writer lock held."""
     result_path = folder / RESULT_FILE
@@ -149,35 +185,44 @@ def _run(
     else:
         output_folder(folder)
         remove_checkpoint(folder)
-        _write_text_atomic(folder / SCENE_FILE, scene_toml)
+        try:
+            _write_text_atomic(folder / SCENE_FILE, scene_toml)
+        except OSError as err:
+            raise OutputError(
+                f"{folder}: cannot write {SCENE_FILE} ({err.strerror or err}); nothing is run",
+                frames=0,
+            ) from None
         writer = loop.writer(result_path, scene_toml)
         writer.append(loop.frame_values())
 
     log.info("%s: %s, %d frames -> %s", scene.name, loop.describe(), scene.frame_count, result_path)
     every = scene.solver.checkpoint_every
     try:
-        with _stop_signals() as stop:
-            start = time.perf_counter()
-            loop.prepare()
-            log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
-            total, done = scene.frame_count - 1, loop.frame
-            with progress(total, done, quiet, "simulating", delay=2.0) as bar:
-                while loop.frame < scene.frame_count - 1:
-                    loop.step_frame()
-                    writer.append(loop.frame_values())
-                    last = loop.frame == scene.frame_count - 1
-                    if (loop.frame % every == 0 or stop) and not last:
-                        writer.flush()  # the checkpoint's frame must be on disk first
-                        save_checkpoint(folder, loop.frame, scene_toml, loop.checkpoint_state())
-                    bar.update(1)
-                    if stop and not last:
-                        raise RunInterrupted(
-                            f"{signal.Signals(stop[0]).name} at t = {loop.time:.6g} s: frames "
-                            f"0-{loop.frame} are written, with a checkpoint; continue with "
-                            f"'jellysim run {_scene_argument(folder)} --out {folder} --resume'",
-                            signal_number=stop[0],
-                            frame=loop.frame,
-                        )
+        start = time.perf_counter()
+        loop.prepare()
+        log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
+        total, done = scene.frame_count - 1, loop.frame
+        with progress(total, done, quiet, "simulating", delay=2.0) as bar:
+            while loop.frame < scene.frame_count - 1:
+                loop.step_frame()
+                writer.append(loop.frame_values())
+                last = loop.frame == scene.frame_count - 1
+                if (loop.frame % every == 0 or stop) and not last:
+                    writer.flush()  # the checkpoint's frame must be on disk first
+                    _checkpoint(folder, loop, scene_toml, writer.frames)
+                bar.update(1)
+                if stop and not last:
+                    raise RunInterrupted(
+                        f"{signal.Signals(stop[0]).name} at t = {loop.time:.6g} s: frames "
+                        f"0-{loop.frame} are written, with a checkpoint; continue with "
+                        f"'jellysim run {_scene_argument(folder)} --out {folder} --resume'",
+                        signal_number=stop[0],
+                        frame=loop.frame,
+                    )
+        writer.flush()
+    except OutputError as err:
+        writer.close(discard=True)
+        raise OutputError(f"{err}{_way_on(folder)}", frames=err.frames) from None
     finally:
         writer.close()
     loop.finish()

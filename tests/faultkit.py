@@ -1,0 +1,111 @@
+"""What the tests of runs that stop early share (importable: pytest's pythonpath holds tests/):
+the command line, a result's datasets compared bit for bit, and what a folder holds now."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+import jellysim
+from jellysim import fields
+
+RUNNER = Path(__file__).parent / "faults" / "runner.py"
+
+
+def sets(overrides: list[str]) -> list[str]:
+    return [arg for item in overrides for arg in ("--set", item)]
+
+
+def run_command(
+    out: Path, overrides: list[str], *extra: str, preset: str = "brown-jelly", fault: str = ""
+) -> list[str]:
+    """``jellysim run`` as a user types it; with ``fault``, through tests/faults/runner.py."""
+    head = (
+        [sys.executable, str(RUNNER), fault, "--"] if fault else [sys.executable, "-m", "jellysim"]
+    )
+    return [*head, "run", preset, "--out", str(out), "--quiet", *sets(overrides), *extra]
+
+
+def jellysim_run(
+    out: Path, overrides: list[str], *extra: str, preset: str = "brown-jelly", fault: str = ""
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        run_command(out, overrides, *extra, preset=preset, fault=fault),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def datasets(folder: Path) -> dict[str, np.ndarray]:
+    found: dict[str, np.ndarray] = {}
+    with jellysim.open_result(folder) as r:
+
+        def visit(name: str, obj: object) -> None:
+            if isinstance(obj, h5py.Dataset):
+                found[name] = obj[()]
+
+        r.file.visititems(visit)
+    return found
+
+
+def attributes(folder: Path) -> dict[str, object]:
+    with jellysim.open_result(folder) as r:
+        return {k: r.file.attrs[k] for k in r.file.attrs}
+
+
+def assert_same_result(a: Path, b: Path) -> None:
+    """Every dataset and root attribute of the two results equal bit for bit."""
+    left, right = datasets(a), datasets(b)
+    assert left.keys() == right.keys()
+    for name in left:
+        assert left[name].dtype == right[name].dtype, name
+        assert np.array_equal(left[name], right[name]), f"{name} differs from the reference run"
+    assert attributes(a).keys() == attributes(b).keys()
+    for key, value in attributes(a).items():
+        assert np.array_equal(value, attributes(b)[key]), f"attribute {key} differs"
+
+
+def assert_invalid_input(done: subprocess.CompletedProcess[str]) -> None:
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    assert 1 <= len(done.stderr.strip().splitlines()) <= 3, done.stderr
+    assert done.stdout == ""
+
+
+def checkpoint_frame(folder: Path) -> int | None:
+    try:
+        with np.load(folder / "checkpoint.npz") as checkpoint:
+            return int(checkpoint["frame"])
+    except (OSError, ValueError, KeyError, EOFError):
+        return None  # none yet
+
+
+def written_frames(folder: Path) -> int:
+    """The frames on disk now, read as any HDF5 tool would (plain h5py, no jellysim)."""
+    try:
+        return plain_frames(folder / "result.h5")
+    except (OSError, KeyError, ValueError):
+        return 0  # no file yet, or the writer is (re)creating it
+
+
+def plain_frames(path: Path) -> int:
+    """Open ``path`` with plain ``h5py.File(path, "r")`` and count the frames every per-frame
+    dataset holds; raises what h5py raises when it does not open."""
+    with h5py.File(path, "r") as f:
+        return min(
+            int(f[field.path].shape[0])
+            for field in fields.FIELDS
+            if field.per_frame and field.path in f
+        )
+
+
+def one_line(stderr: str) -> str:
+    """The single line a failed run prints (no traceback)."""
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    return lines[0]

@@ -1,0 +1,143 @@
+"""Issue 24: a run stopped at any moment by SIGKILL, SIGTERM or SIGINT leaves a result that plain
+h5py and xarray open, holding at least every frame seen on disk before the stop, and continues
+bit for bit. 24 moments drawn with a fixed seed across the three frame loops (tentacles, fluid,
+soft bell), each after a random share of the uninterrupted run's wall time."""
+
+from __future__ import annotations
+
+import random
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import scenes
+from faultkit import (
+    assert_same_result,
+    checkpoint_frame,
+    jellysim_run,
+    plain_frames,
+    run_command,
+    written_frames,
+)
+
+xarray = pytest.importorskip("xarray")
+
+# Each loop's scene, small enough for a few seconds of simulation, checkpoints often enough that
+# most stops land between two of them.
+SCENES: dict[str, tuple[str, list[str]]] = {
+    "tentacles": (
+        "brown-jelly",
+        [
+            "duration=60", "fps=30", "tentacles.count=2", "tentacles.particles=20",
+            "solver.checkpoint_every=40", "solver.dt_safety=0.02",
+        ],
+    ),
+    "fluid": (
+        "dam-break-2d",
+        ["fluid.spacing=0.01", "duration=0.05", "fps=200", "solver.checkpoint_every=3"],
+    ),
+    "soft-bell": (
+        "moon-jelly-weightless",
+        [
+            *(f"{key}={value}" for key, value in scenes.SMALL_MOON.items()),
+            "duration=2", "fps=20", "tentacles.count=2", "solver.checkpoint_every=4",
+        ],
+    ),
+}  # fmt: skip
+MOMENTS_PER_LOOP = {"tentacles": 10, "fluid": 7, "soft-bell": 7}
+SIGNALS = (signal.SIGKILL, signal.SIGKILL, signal.SIGTERM, signal.SIGINT)
+
+
+def _moments() -> list[tuple[str, signal.Signals, float]]:
+    draw = random.Random(24)
+    return [
+        (loop, draw.choice(SIGNALS), draw.uniform(0.05, 1.0))
+        for loop, count in MOMENTS_PER_LOOP.items()
+        for _ in range(count)
+    ]
+
+
+MOMENTS = _moments()
+
+
+@pytest.fixture(scope="module")
+def references(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, float]]:
+    """Each loop's uninterrupted run and its wall time (from start to exit, as a stop sees it)."""
+    found = {}
+    for loop, (preset, overrides) in SCENES.items():
+        out = tmp_path_factory.mktemp(f"reference-{loop}")
+        for _ in range(2):  # the first run may compile the kernels: the second is timed
+            start = time.monotonic()
+            done = jellysim_run(out, overrides, "--force", preset=preset)
+            assert done.returncode == 0, done.stderr
+        found[loop] = (out, time.monotonic() - start)
+    return found
+
+
+@pytest.mark.parametrize(
+    ("loop", "stop", "share"),
+    MOMENTS,
+    ids=[f"{loop}-{stop.name}-{share:.2f}" for loop, stop, share in MOMENTS],
+)
+def test_a_run_stopped_at_any_moment_opens_everywhere_and_resumes_bit_for_bit(
+    tmp_path: Path,
+    references: dict[str, tuple[Path, float]],
+    loop: str,
+    stop: signal.Signals,
+    share: float,
+) -> None:
+    preset, overrides = SCENES[loop]
+    reference, wall = references[loop]
+    out = tmp_path / "stopped"
+    process = subprocess.Popen(
+        run_command(out, overrides, preset=preset),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen = 0
+    deadline = time.monotonic() + share * wall
+    if stop != signal.SIGKILL:
+        # A stop signal is handled from the moment the run has its folder (before, the
+        # interpreter is still starting: its default action, with nothing written, applies).
+        while not (out / "scene.toml").exists() and process.poll() is None:
+            time.sleep(0.005)
+    while time.monotonic() < deadline and process.poll() is None:
+        seen = max(seen, written_frames(out))
+        time.sleep(0.01)
+    if process.poll() is None:
+        process.send_signal(stop)
+    _, stderr = process.communicate(timeout=300)
+    finished = process.returncode == 0
+    if not finished:
+        expected = -signal.SIGKILL if stop == signal.SIGKILL else 128 + stop
+        assert process.returncode == expected, stderr
+        if stop != signal.SIGKILL:
+            assert len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr, stderr
+            assert f"stopped by {stop.name}" in stderr
+
+    result = out / "result.h5"
+    if result.exists():
+        # Plain h5py, no jellysim, no h5clear: every frame seen before the stop is there.
+        frames = plain_frames(result)
+        assert frames >= seen
+        with h5py.File(result, "r") as f:
+            times = f["time"][:frames]
+            fps = float(f.attrs["fps"]) if "fps" in f.attrs else None
+        assert np.all(np.diff(times) > 0)
+        if fps is not None:
+            np.testing.assert_allclose(times, np.arange(frames) / fps, rtol=1e-9, atol=1e-12)
+        with xarray.open_dataset(result, engine="h5netcdf", phony_dims="access") as data:
+            assert data["time"].shape[0] >= frames
+    else:
+        assert seen == 0
+
+    if not finished:
+        resumable = result.exists() and checkpoint_frame(out) is not None
+        more = jellysim_run(out, overrides, "--resume" if resumable else "--force", preset=preset)
+        assert more.returncode == 0, more.stderr
+    assert_same_result(out, reference)

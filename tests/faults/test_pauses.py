@@ -1,0 +1,73 @@
+"""Issue 24: SIGKILL at the exact moments that matter most, reached by pausing the run there
+(tests/faults/runner.py): in the middle of a batch's dataset writes, after every dataset of a
+batch is written but before HDF5 flushes, and while a checkpoint is being written. Each time
+plain h5py opens the file, it holds the frames of the last flush, and --resume is bit for bit."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+from pathlib import Path
+
+import pytest
+from faultkit import (
+    assert_same_result,
+    checkpoint_frame,
+    jellysim_run,
+    plain_frames,
+    run_command,
+)
+
+# 91 frames written in batches of a second's wall time at most; checkpoints every 10 frames.
+OVERRIDES = [
+    "duration=3", "fps=30", "tentacles.count=2", "tentacles.particles=20",
+    "solver.checkpoint_every=10", "solver.dt_safety=0.02",
+]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("reference")
+    done = jellysim_run(out, OVERRIDES, "--force")
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def _kill_when_paused(out: Path, fault: str) -> str:
+    process = subprocess.Popen(
+        run_command(out, OVERRIDES, fault=fault),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stderr is not None
+        line = process.stderr.readline()  # the runner's PAUSED line
+        assert line.startswith("PAUSED"), line + process.stderr.read()
+        process.send_signal(signal.SIGKILL)
+        process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == -signal.SIGKILL
+    return line
+
+
+@pytest.mark.parametrize("fault", ["pause-in-write:3", "pause-in-flush:3", "pause-in-checkpoint:2"])
+def test_sigkill_during_a_write_leaves_the_last_flush(
+    tmp_path: Path, reference: Path, fault: str
+) -> None:
+    out = tmp_path / "killed"
+    _kill_when_paused(out, fault)
+    frames = plain_frames(out / "result.h5")
+    assert frames >= 1
+    checkpoint = checkpoint_frame(out)
+    if fault.startswith("pause-in-checkpoint"):
+        # The second checkpoint was being written: the first stays, whole.
+        assert checkpoint == 10
+        assert (out / "checkpoint.npz.tmp").exists()
+    assert checkpoint is not None and checkpoint < frames
+    done = jellysim_run(out, OVERRIDES, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert_same_result(out, reference)
