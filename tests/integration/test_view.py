@@ -4,7 +4,6 @@ exiting 0, and the page itself in headless Chromium (tests/integration/view_e2e.
 
 from __future__ import annotations
 
-import http.client
 import json
 import os
 import shutil
@@ -13,14 +12,15 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 import urllib.request
 from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from viewing import get, serving, status
 
 import jellysim
 from jellysim import fields
@@ -28,8 +28,8 @@ from jellysim.cli.main import main
 from jellysim.errors import InputError
 from jellysim.interpolation import interpolate_result
 from jellysim.render.pipeline import scene_look
-from jellysim.view import find_web_modules, serve
-from jellysim.view.server import WEB_MODULES_ENV, ViewServer
+from jellysim.view import find_web_modules
+from jellysim.view.server import TOKEN_HEADER, WEB_MODULES_ENV, ViewLimits, ViewServer
 
 CHROMIUM = "/usr/bin/chromium"
 FLUID_FRAMES = 10
@@ -73,73 +73,24 @@ def fluid(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-@contextmanager
-def serving(folder: str | Path) -> Iterator[str]:
-    """``serve`` in a thread on a free port; yields its address."""
-    started = threading.Event()
-    box: dict[str, object] = {}
-
-    def ready(server: ViewServer) -> None:
-        box["server"] = server
-        started.set()
-
-    def run() -> None:
-        try:
-            serve(folder, port=0, browser=False, ready=ready)
-        except BaseException as err:  # handed to the test
-            box["error"] = err
-            started.set()
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    assert started.wait(60)
-    if "error" in box:
-        raise box["error"]  # type: ignore[misc]
-    server = box["server"]
-    assert isinstance(server, ViewServer)
-    try:
-        yield server.url
-    finally:
-        server.shutdown()
-        thread.join(10)
+@pytest.fixture(scope="module")
+def brown_view(brown: jellysim.Result) -> Iterator[ViewServer]:
+    with serving(brown.folder) as server:
+        yield server
 
 
 @pytest.fixture(scope="module")
-def brown_url(brown: jellysim.Result) -> Iterator[str]:
-    with serving(brown.folder) as url:
-        yield url
-
-
-@pytest.fixture(scope="module")
-def fluid_url(fluid: Path) -> Iterator[str]:
-    with serving(fluid) as url:
-        yield url
-
-
-def get(url: str) -> bytes:
-    with urllib.request.urlopen(url, timeout=30) as response:
-        return response.read()
-
-
-def status(url: str, path: str, headers: dict[str, str] | None = None) -> int:
-    """The status of a GET of ``path`` sent exactly as written (no client-side normalising)."""
-    host, port = url.removeprefix("http://").rstrip("/").rsplit(":", 1)
-    connection = http.client.HTTPConnection(host, int(port), timeout=30)
-    try:
-        connection.request("GET", path, headers=headers or {})
-        response = connection.getresponse()
-        response.read()
-        return response.status
-    finally:
-        connection.close()
+def fluid_view(fluid: Path) -> Iterator[ViewServer]:
+    with serving(fluid) as server:
+        yield server
 
 
 def floats(data: bytes, *shape: int) -> np.ndarray:
     return np.frombuffer(data, dtype="<f4").reshape(shape)
 
 
-def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -> None:
-    meta = json.loads(get(brown_url + "meta.json"))
+def test_metadata_describes_the_result(brown: jellysim.Result, brown_view: ViewServer) -> None:
+    meta = json.loads(get(brown_view, "/meta.json"))
     f = brown.file
     scene = brown.scene
     assert meta["name"] == "brown-jelly"
@@ -149,10 +100,12 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -
     assert meta["look"]["bell_color"] == list(look.bell_color)
     assert meta["look"]["tentacle_color"] == list(look.tentacle_color)
     assert meta["look"]["bell_transparency"] == look.bell_transparency
+    vertices = f[fields.BELL_SURFACE_VERTICES.path].shape[1]
     assert meta["bell"] == {
         "present": True,
-        "vertices": f[fields.BELL_SURFACE_VERTICES.path].shape[1],
+        "vertices": vertices,
         "faces": f[fields.BELL_SURFACE_FACES.path].shape[0],
+        "frame_bytes": vertices * 3 * 4,
     }
     assert meta["tentacles"] == {
         "present": True,
@@ -160,8 +113,14 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -
         "particles": 60,
         "interpolation": scene.tentacles.interpolation,
         "max_interpolation": 50,
+        "frame_bytes": 6 * 60 * 3 * 4,
     }
-    assert meta["fluid"]["present"] is False
+    assert meta["fluid"]["present"] is False and meta["fluid"]["frame_bytes"] == 0
+    assert meta["limits"] == {
+        "max_response_bytes": ViewLimits().max_response_bytes,
+        "max_frames_per_request": 256,
+        "requests_per_client": ViewLimits().requests_per_client,
+    }
     low, high = np.array(meta["bounds"])
     points = np.concatenate(
         [
@@ -175,17 +134,19 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_url: str) -
     assert meta["travels"] is False  # 0.6 s of swimming: less than its size
 
 
-def test_bell_faces_and_vertices_match_the_result(brown: jellysim.Result, brown_url: str) -> None:
+def test_bell_faces_and_vertices_match_the_result(
+    brown: jellysim.Result, brown_view: ViewServer
+) -> None:
     f = brown.file
-    faces = np.frombuffer(get(brown_url + "bell-faces"), dtype="<u4").reshape(-1, 3)
+    faces = np.frombuffer(get(brown_view, "/bell-faces"), dtype="<u4").reshape(-1, 3)
     np.testing.assert_array_equal(faces, f[fields.BELL_SURFACE_FACES.path][:])
     vertices = f[fields.BELL_SURFACE_VERTICES.path].shape[1]
-    chunk = floats(get(brown_url + "frames?part=bell&start=3&count=5"), 5, vertices, 3)
+    chunk = floats(get(brown_view, "/frames?part=bell&start=3&count=5"), 5, vertices, 3)
     np.testing.assert_allclose(
         chunk, f[fields.BELL_SURFACE_VERTICES.path][3:8], rtol=1e-6, atol=1e-7
     )
     # A chunk reaching past the end stops at the last frame.
-    tail = floats(get(brown_url + "frames?part=bell&start=10&count=16"), 3, vertices, 3)
+    tail = floats(get(brown_view, "/frames?part=bell&start=10&count=16"), 3, vertices, 3)
     np.testing.assert_allclose(
         tail, f[fields.BELL_SURFACE_VERTICES.path][10:], rtol=1e-6, atol=1e-7
     )
@@ -193,33 +154,36 @@ def test_bell_faces_and_vertices_match_the_result(brown: jellysim.Result, brown_
 
 @pytest.mark.parametrize("factor", [None, 1, 4])
 def test_tentacle_chunks_are_the_drawn_tentacles(
-    brown: jellysim.Result, brown_url: str, factor: int | None
+    brown: jellysim.Result, brown_view: ViewServer, factor: int | None
 ) -> None:
     drawn = interpolate_result(brown, factor)
     count = drawn.shape[1]
     assert count == 6 * (factor or brown.scene.tentacles.interpolation)
     query = "" if factor is None else f"&interpolation={factor}"
     for start, length in ((0, 13), (0, 4), (7, 4), (12, 1)):
-        url = f"{brown_url}frames?part=tentacles&start={start}&count={length}{query}"
-        chunk = floats(get(url), length, count, 60, 3)
+        url = f"/frames?part=tentacles&start={start}&count={length}{query}"
+        chunk = floats(get(brown_view, url), length, count, 60, 3)
         np.testing.assert_allclose(chunk, drawn[start : start + length], rtol=0, atol=1e-6)
     # The simulated tentacles are among them, as simulated.
     every = count // 6
     np.testing.assert_allclose(chunk[:, ::every], brown.tentacle_positions[12:13], atol=1e-6)
 
 
-def test_fluid_chunks_are_world_points_with_dead_particles_nan(fluid: Path, fluid_url: str) -> None:
-    meta = json.loads(get(fluid_url + "meta.json"))
+def test_fluid_chunks_are_world_points_with_dead_particles_nan(
+    fluid: Path, fluid_view: ViewServer
+) -> None:
+    meta = json.loads(get(fluid_view, "/meta.json"))
     assert meta["fluid"] == {
         "present": True,
         "particles": FLUID_PARTICLES,
         "dimensions": 2,
         "radius": pytest.approx(0.005),
+        "frame_bytes": FLUID_PARTICLES * 3 * 4,
     }
     assert not meta["bell"]["present"] and not meta["tentacles"]["present"]
-    kinds = np.frombuffer(get(fluid_url + "fluid-kinds"), dtype=np.uint8)
+    kinds = np.frombuffer(get(fluid_view, "/fluid-kinds"), dtype=np.uint8)
     assert kinds.tolist() == [0] * (FLUID_PARTICLES - 12) + [1] * 12
-    chunk = floats(get(fluid_url + "frames?part=fluid&start=2&count=4"), 4, FLUID_PARTICLES, 3)
+    chunk = floats(get(fluid_view, "/frames?part=fluid&start=2&count=4"), 4, FLUID_PARTICLES, 3)
     with h5py.File(fluid / "result.h5", "r") as f:
         position, alive = f[fields.FLUID_POSITION.path][2:6], f[fields.FLUID_ALIVE.path][2:6]
     assert np.all(np.isnan(chunk[~alive])) and not np.any(np.isnan(chunk[alive]))
@@ -227,13 +191,14 @@ def test_fluid_chunks_are_world_points_with_dead_particles_nan(fluid: Path, flui
     assert np.all(chunk[alive][:, 1] == 0.0)
 
 
-def test_only_the_named_routes_are_served(brown_url: str) -> None:
-    page = get(brown_url).decode("utf-8")
+def test_only_the_named_routes_are_served(brown_view: ViewServer) -> None:
+    page = get(brown_view, "/?token=" + brown_view.token).decode("utf-8")
     assert '<script type="importmap">' in page and "/static/viewer.js" in page
+    assert brown_view.page_url == f"{brown_view.url}?token={brown_view.token}"
     for path in ("/static/viewer.js", "/static/data.js", "/static/style.css"):
-        assert status(brown_url, path) == 200
+        assert status(brown_view, path) == 200
     for path in THREE_PATHS:
-        assert status(brown_url, path) == 200
+        assert status(brown_view, path) == 200
     for path in (
         "/nothing",
         "/static/../../etc/passwd",
@@ -245,7 +210,7 @@ def test_only_the_named_routes_are_served(brown_url: str) -> None:
         "//etc/passwd",
         "/frames/../meta.json",
     ):
-        assert status(brown_url, path) == 404, path
+        assert status(brown_view, path) == 404, path
 
 
 @pytest.mark.parametrize(
@@ -262,13 +227,13 @@ def test_only_the_named_routes_are_served(brown_url: str) -> None:
         ("part=fluid&start=0&count=1", 404),
     ],
 )
-def test_bad_frame_requests(brown_url: str, query: str, code: int) -> None:
-    assert status(brown_url, "/frames?" + query) == code
+def test_bad_frame_requests(brown_view: ViewServer, query: str, code: int) -> None:
+    assert status(brown_view, "/frames?" + query) == code
 
 
-def test_a_foreign_host_name_is_refused_on_loopback(brown_url: str) -> None:
-    assert status(brown_url, "/meta.json", {"Host": "rebound.example:80"}) == 403
-    assert status(brown_url, "/meta.json", {"Host": "localhost:1"}) == 200
+def test_a_foreign_host_name_is_refused_on_loopback(brown_view: ViewServer) -> None:
+    assert status(brown_view, "/meta.json", {"Host": "rebound.example:80"}) == 403
+    assert status(brown_view, "/meta.json", {"Host": "localhost:1"}) == 200
 
 
 def _exit_2(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
@@ -332,7 +297,12 @@ def test_ctrl_c_stops_the_server_with_exit_0(brown: jellysim.Result) -> None:
         line = process.stdout.readline()
         assert line.startswith(f"jellysim view: serving {brown.folder} at http://127.0.0.1:")
         url = line.split(" at ")[1].split()[0]
-        assert json.loads(get(url + "meta.json"))["frames"] == brown.frames
+        base, token = url.split("?token=")
+        with urllib.request.urlopen(url, timeout=30) as page:  # the address printed opens it
+            assert b'<script type="importmap">' in page.read()
+        meta = urllib.request.Request(base + "meta.json", headers={TOKEN_HEADER: token})
+        with urllib.request.urlopen(meta, timeout=30) as answer:
+            assert json.loads(answer.read())["frames"] == brown.frames
         process.send_signal(signal.SIGINT)
         _, err = process.communicate(timeout=30)
     finally:
@@ -354,8 +324,12 @@ def _browser_tools() -> tuple[str, Path] | None:
 
 
 def test_the_page_plays_in_headless_chromium(
-    brown: jellysim.Result, brown_url: str, fluid_url: str, tmp_path: Path
+    brown: jellysim.Result, brown_view: ViewServer, fluid_view: ViewServer, tmp_path: Path
 ) -> None:
+    """The page plays both results; and a third time the brown jelly, from a server whose
+    answers hold at most 3 frames of its largest part and that answers one request at a time
+    per client, its only slot held by another request when the page starts: the page fetches
+    every part in several pieces within the limit, waits out the 429 and plays through."""
     tools = _browser_tools()
     if tools is None:
         if os.environ.get("CI"):
@@ -363,18 +337,52 @@ def test_the_page_plays_in_headless_chromium(
         pytest.skip("node, web/node_modules (make web) or chromium (make chromium) missing")
     node, modules = tools
     script = Path(__file__).with_name("view_e2e.mjs")
-    done = subprocess.run(
-        [node, str(script), str(modules), CHROMIUM, str(tmp_path), brown_url, fluid_url],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    meta = json.loads(get(brown_view, "/meta.json"))
+    factor = brown.scene.tentacles.interpolation
+    frame_bytes = {
+        "bell": meta["bell"]["frame_bytes"],
+        "tentacles": meta["tentacles"]["frame_bytes"] * max(factor, 3),  # the page's factors
+    }
+    small = ViewLimits(max_response_bytes=3 * max(frame_bytes.values()), requests_per_client=1)
+    with serving(brown.folder, small) as pieces:
+        holder = threading.Thread(target=_hold_a_slot, args=(pieces,), daemon=True)
+        holder.start()
+        urls = [view.page_url for view in (brown_view, fluid_view, pieces)]
+        done = subprocess.run(
+            [node, str(script), str(modules), CHROMIUM, str(tmp_path), *urls],
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
+        holder.join(10)
+        assert pieces.budget.refused >= 1
     assert done.returncode == 0, done.stdout + done.stderr
     pages = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
-    assert len(pages) == 2
-    jelly, block = pages
-    assert jelly["advanced"] and jelly["pixelsChanged"] and block["advanced"]
-    assert jelly["drawnTentacles"] == [6 * brown.scene.tentacles.interpolation, 6 * 3]
+    assert len(pages) == 3
+    jelly, block, pieced = pages
+    for page in pages:
+        assert page["advanced"] and page["wrapped"] > page["frames"] // 2
+    assert jelly["pixelsChanged"] and pieced["pixelsChanged"]
+    assert jelly["drawnTentacles"] == [6 * factor, 6 * 3]
     assert block["fluidPoints"][0] > 0 and block["fluidPoints"][1] == 0
     for page in pages:
         assert Path(page["screenshot"]).stat().st_size > 5000
+    # Default limits: one piece per part and factor for 13 frames, no 429.
+    assert jelly["busy"] == 0 and len(jelly["answers"]["bell"]) == 1
+    # Small limits: several pieces, none over the limit, and the page waited out a 429.
+    assert pieced["busy"] >= 1
+    for part in ("bell", "tentacles"):
+        sizes = pieced["answers"][part]
+        assert max(sizes) <= small.max_response_bytes, (part, sizes)
+    largest = max(frame_bytes, key=frame_bytes.__getitem__)
+    assert len(pieced["answers"][largest]) >= 4, pieced["answers"]
+
+
+def _hold_a_slot(server: ViewServer) -> None:
+    """Hold the one slot of 127.0.0.1 (as another tab's request would) until the server has
+    turned a request away, or for 120 s at most."""
+    with server.budget.slot("127.0.0.1") as granted:
+        assert granted
+        deadline = time.monotonic() + 120
+        while server.budget.refused == 0 and time.monotonic() < deadline:
+            time.sleep(0.02)

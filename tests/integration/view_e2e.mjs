@@ -3,12 +3,15 @@
 //
 //   node view_e2e.mjs NODE_MODULES CHROMIUM SCREENSHOT_DIR URL [URL ...]
 //
-// For each served result it loads the page and checks, through the page's controls and its
-// read-only hook window.jellysimView: no console errors, page errors or failed requests; the
-// animation advances; pause (space bar) stops it; the play button toggles it; the scrub slider
-// sets the frame and the picture changes with it; the tentacle slider changes the drawn count;
-// the fluid toggle hides the particles. It fails (exit 1) at the first check that does not hold
-// and prints one JSON line of observations per URL for the caller to check too.
+// Each URL is a page address as `jellysim view` prints it (with the session's token). For each
+// served result it loads the page and checks, through the page's controls and its read-only
+// hook window.jellysimView: no console errors, page errors, failed requests or error answers
+// (but 429, "busy", which the page waits out: counted as `busy`); the animation advances and
+// plays through to the start again; pause (space bar) stops it; the play button toggles it; the
+// scrub slider sets the frame and the picture changes with it; the tentacle slider changes the
+// drawn count; the fluid toggle hides the particles. It fails (exit 1) at the first check that
+// does not hold and prints one JSON line of observations per URL for the caller to check too,
+// with the sizes of the /frames answers per part (`answers`).
 
 import assert from "node:assert/strict";
 import path from "node:path";
@@ -21,10 +24,25 @@ const TIMEOUT = 15000;
 const hook = (page, name) => page.evaluate((key) => window.jellysimView[key], name);
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 
+// The metadata, asked for as the page asks (with the token, a 429 asked again a second later).
+async function fetchMeta(url) {
+  const headers = { "X-Jellysim-Token": new URL(url).searchParams.get("token") };
+  for (;;) {
+    const response = await fetch(new URL("/meta.json", url), { headers });
+    if (response.status !== 429) {
+      assert.equal(response.status, 200);
+      return response.json();
+    }
+    await sleep(1000);
+  }
+}
+
 async function check(browser, url, index) {
   const page = await browser.newPage({ viewport: { width: 800, height: 600 } });
   const problems = [];
   page.on("console", (message) => {
+    // Chromium logs every error answer, the 429s the page waits out included.
+    if (message.type() === "error" && message.text().includes("status of 429")) return;
     if (message.type() === "error" || message.type() === "warning") {
       problems.push(`console ${message.type()}: ${message.text()}`);
     }
@@ -34,19 +52,38 @@ async function check(browser, url, index) {
     // A chunk the page dropped on purpose never fails; anything failing is a problem.
     problems.push(`request failed: ${request.url()} ${request.failure()?.errorText}`);
   });
+  const answers = {}; // part -> sizes (bytes) of the /frames answers
+  let busy = 0;
   page.on("response", (response) => {
+    if (response.status() === 429) {
+      busy++;
+      return;
+    }
     if (response.status() >= 400) problems.push(`HTTP ${response.status()}: ${response.url()}`);
+    const address = new URL(response.url());
+    if (address.pathname === "/frames") {
+      const part = address.searchParams.get("part");
+      (answers[part] ??= []).push(Number(response.headers()["content-length"]));
+    }
   });
 
-  const meta = await (await fetch(new URL("meta.json", url))).json();
   await page.goto(url);
   await page.waitForFunction(() => window.jellysimView?.ready === true, null, { timeout: TIMEOUT });
+  const meta = await fetchMeta(url);
   const observed = { url, frames: meta.frames };
 
-  // Playing: the frame advances.
+  // Playing: the frame advances, and goes on through every chunk until it wraps to the start.
   const first = await hook(page, "frame");
   await page.waitForFunction((f) => window.jellysimView.frame !== f, first, { timeout: TIMEOUT });
   observed.advanced = true;
+  let highest = -1;
+  for (const deadline = Date.now() + 2 * TIMEOUT; ; await sleep(20)) {
+    const frame = await hook(page, "frame");
+    if (frame < highest) break;
+    highest = Math.max(highest, frame);
+    assert.ok(Date.now() < deadline, `playback stopped at frame ${highest}`);
+  }
+  observed.wrapped = highest; // the last frame drawn before the start again
 
   // Pause with the space bar: the frame stays put. Play and pause again with the button.
   await page.keyboard.press("Space");
@@ -99,7 +136,7 @@ async function check(browser, url, index) {
   assert.equal(await hook(page, "error"), null);
   assert.deepEqual(problems, []);
   await page.close();
-  return observed;
+  return { ...observed, answers, busy };
 }
 
 const browser = await chromium.launch({

@@ -41,6 +41,22 @@ def test_a_window_of_frames_equals_the_slice_of_the_whole(brown):
         interpolate_result(brown, 3, frames=(5, 5))
 
 
+def test_frames_before_first_are_read_but_not_drawn(brown):
+    # What a window costs is the frames drawn (the viewer bounds its answers by them), not the
+    # frames its lag reads: those before ``first`` are inputs only, and the frames drawn are
+    # the same numbers as when every frame is drawn.
+    positions, margin = brown.tentacle_positions, brown.margin
+    whole = interpolate_tentacles(positions, margin, brown.time, 3, 0.01, lag_spread=0.25)
+    for first in (1, 17, whole.shape[0] - 1):
+        tail = interpolate_tentacles(
+            positions, margin, brown.time, 3, 0.01, lag_spread=0.25, first=first
+        )
+        assert tail.shape == (whole.shape[0] - first, *whole.shape[1:])
+        np.testing.assert_array_equal(tail, whole[first:])
+    with pytest.raises(ValueError, match="first="):
+        interpolate_tentacles(positions, margin, brown.time, 3, 0.01, first=whole.shape[0])
+
+
 def test_margin_point_walks_the_polyline():
     angles = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     square = np.stack([np.cos(angles), np.sin(angles), np.zeros(12)], axis=1)

@@ -100,18 +100,22 @@ def interpolate_tentacles(
     spacing: float,
     axis: np.ndarray | None = None,
     lag_spread: float = 0.0,
+    first: int = 0,
 ) -> np.ndarray:
-    """Drawn tentacles (F, T * factor, P, 3) from simulated ones (F, T, P, 3).
+    """Drawn tentacles (F - first, T * factor, P, 3) from simulated ones (F, T, P, 3).
 
     ``margin`` (F, R, 3) is the margin polyline per frame, ``times`` (F,) the frame times (s),
     ``axis`` the bell axis (default +z, or (F, 3) per frame), ``spacing`` d (m), ``lag_spread``
-    the largest time lag (s) of a drawn tentacle (0 turns the lags off). Drawn tentacle
-    ``k * factor`` is simulated tentacle k, unchanged.
+    the largest time lag (s) of a drawn tentacle (0 turns the lags off). Frames before
+    ``first`` are read (the lagged shapes of later frames reach back to them) but not drawn.
+    Drawn tentacle ``k * factor`` is simulated tentacle k, unchanged.
     """
     positions = np.asarray(positions, dtype=np.float64)
     n_frames, count, particles, _ = positions.shape
     if factor < 1:
         raise ValueError("factor must be >= 1")
+    if not 0 <= first < n_frames:
+        raise ValueError(f"first={first}: expected 0 to {n_frames - 1}")
     axes = np.broadcast_to(
         np.array([0.0, 0.0, 1.0]) if axis is None else np.asarray(axis, dtype=np.float64),
         (n_frames, 3),
@@ -129,9 +133,12 @@ def interpolate_tentacles(
     frames_sim = local_frames(roots, centres[:, None], axes[:, None])
     shapes = np.einsum("ftij,ftpj->ftpi", frames_sim, positions - roots[:, :, None])
 
-    # Shapes at lagged times: linear in time between stored frames, held at the ends.
+    # Shapes at lagged times of the frames drawn: linear in time between stored frames, held
+    # at the ends.
     sample = np.clip(
-        np.interp(times[:, None] - lags[None, :], times, np.arange(n_frames)), 0, n_frames - 1
+        np.interp(times[first:, None] - lags[None, :], times, np.arange(n_frames)),
+        0,
+        n_frames - 1,
     )
     lo = np.floor(sample).astype(np.int64)
     hi = np.minimum(lo + 1, n_frames - 1)
@@ -144,8 +151,8 @@ def interpolate_tentacles(
         None, :, None, None
     ] * lagged(right)
 
-    out = np.empty((n_frames, drawn, particles, 3))
-    for f in range(n_frames):
+    out = np.empty((n_frames - first, drawn, particles, 3))
+    for i, f in enumerate(range(first, n_frames)):
         frame0 = local_frames(roots[f, 0], centres[f], axes[f])
         phi = np.unwrap(_angles(roots[f], centres[f], frame0))
         step = np.mod(np.roll(phi, -1) - phi, 2.0 * np.pi)
@@ -155,15 +162,15 @@ def interpolate_tentacles(
         new_roots = margin_point(margin[f], centres[f], frame0, angle)
         new_roots[t == 0] = roots[f, left[t == 0]]  # simulated roots exactly
         frames_new = local_frames(new_roots, centres[f], axes[f])
-        world = np.einsum("tij,tpi->tpj", frames_new, blended[f])  # back from local frames
+        world = np.einsum("tij,tpi->tpj", frames_new, blended[i])  # back from local frames
         segments = np.diff(world, axis=1)
         lengths = np.linalg.norm(segments, axis=2, keepdims=True)
         units = segments / np.maximum(lengths, 1e-300)
-        out[f, :, 0] = new_roots
-        out[f, :, 1:] = new_roots[:, None] + spacing * np.cumsum(units, axis=1)
+        out[i, :, 0] = new_roots
+        out[i, :, 1:] = new_roots[:, None] + spacing * np.cumsum(units, axis=1)
     # Simulated tentacles are drawn exactly as simulated.
     simulated = np.arange(0, drawn, factor)
-    out[:, simulated] = positions
+    out[:, simulated] = positions[first:]
     return out
 
 
@@ -203,7 +210,8 @@ def interpolate_result(
     ``factor`` defaults to the scene's ``tentacles.interpolation``; ``lag`` (s) to a quarter of
     the pulse period (0 turns the anti-banding lag off). ``frames`` = (start, stop) gives only
     those frames, (stop - start, T * factor, P, 3), equal to the slice of the whole: it reads
-    the frames from ``lag`` before ``start`` on, which the lagged shapes need, and no others.
+    the frames from ``lag`` before ``start`` on, which the lagged shapes need, and no others,
+    and draws only the frames asked for.
     """
     scene = result.scene
     factor = scene.tentacles.interpolation if factor is None else factor
@@ -215,12 +223,12 @@ def interpolate_result(
     # The earliest frame a lagged shape of frame `start` reads (interpolate_tentacles holds the
     # shapes at the first frame before that, so the window must begin at or before it).
     first = max(0, int(np.searchsorted(times, times[start] - max(lag, 0.0), side="right")) - 1)
-    drawn = interpolate_tentacles(
+    return interpolate_tentacles(
         result.read(fields.TENTACLE_POSITION, slice(first, stop)),
         result.read(fields.BELL_MARGIN, slice(first, stop)),
         times[first:stop],
         factor,
         scene.tentacles.spacing,
         lag_spread=lag,
+        first=start - first,
     )
-    return drawn[start - first :]

@@ -2,33 +2,45 @@
 
 Routes (GET only; anything else is 404, so no path reaches the file system but these):
 
-- ``/`` the page, ``/static/NAME`` its files (those directly in ``static/``, listed at start);
+- ``/?token=TOKEN`` the page, ``/static/NAME`` its files (those directly in ``static/``, listed
+  at start);
 - ``/vendor/three/{three.module.js, three.core.js, OrbitControls.js}`` from the npm package;
 - ``/meta.json`` what the page needs to know about the result (:meth:`ResultData.meta`);
 - ``/bell-faces`` uint32 (M, 3), ``/fluid-kinds`` uint8 (N,);
 - ``/frames?part=bell|tentacles|fluid&start=S&count=C[&interpolation=N]`` float32 frames
   S to S + C - 1: bell (C, V, 3), drawn tentacles (C, T N, P, 3), fluid (C, N, 3) with the
   particles that left the domain as NaN. Binary bodies are little-endian, C order, in metres.
+
+What one session may cost the machine is bounded (:class:`ViewLimits`, docs/viewer.md,
+"Security"): the data routes answer only requests carrying the session's token in the
+``X-Jellysim-Token`` header and not sent from another site; an answer's size is known from the
+query before anything is read or computed, and one over ``max_response_bytes`` is refused (413);
+data requests being answered are counted per client address and in all (429 beyond); idle
+connections are closed, and connections beyond ``connections`` are refused (503).
 """
 
 from __future__ import annotations
 
 import base64
 import hashlib
+import hmac
 import ipaddress
 import json
 import os
 import re
+import secrets
 import socket
 import sys
 import threading
 import webbrowser
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any
-from urllib.parse import parse_qs, urlsplit
+from typing import Any, NamedTuple
+from urllib.parse import parse_qs, quote, urlsplit
 
 import numpy as np
 
@@ -54,6 +66,38 @@ MAX_INTERPOLATION = 50  # the slider's top, lowered for results with many tentac
 POINT_BUDGET = 250_000  # drawn tentacle points per frame the slider may reach
 BOUNDS_SAMPLES = 256  # frames sampled (evenly, both ends included) for the camera's framing
 LOOPBACK_NAMES = {"localhost", "127.0.0.1", "::1"}
+TOKEN_HEADER = "X-Jellysim-Token"  # the session's token on every data request
+OWN_FETCH_SITES = {"same-origin", "none"}  # Sec-Fetch-Site values a data request may carry
+FLOAT32_BYTES = 4
+RETRY_AFTER_S = 1  # what a 429 or 503 asks the client to wait
+
+
+@dataclass(frozen=True)
+class ViewLimits:
+    """What one viewer session may cost the machine (docs/viewer.md, "Security";
+    docs/decisions.md, "Viewer limits (issue 24)").
+
+    ``max_response_bytes``: the largest body a data route sends, bytes; ``requests_per_client``
+    and ``data_requests``: data requests answered at once from one client address and in all;
+    ``connections``: connections open at once (each holds a thread); ``idle_timeout``: seconds
+    a connection may wait for a request, or take to send one or receive an answer.
+    """
+
+    max_response_bytes: int = 32 * 2**20
+    requests_per_client: int = 2
+    data_requests: int = 4
+    connections: int = 32
+    idle_timeout: float = 15.0
+
+
+class FrameRequest(NamedTuple):
+    """A checked ``/frames`` query: frames ``start`` to ``stop - 1`` of ``part``, tentacles
+    drawn ``interpolation`` per simulated one (1 for the other parts)."""
+
+    part: str
+    start: int
+    stop: int
+    interpolation: int
 
 
 def find_web_modules() -> Path:
@@ -114,6 +158,12 @@ class ResultData:
         self.interpolation = min(int(scene.tentacles.interpolation), self.max_interpolation)
         fluid = result.dataset(fields.FLUID_POSITION).shape if self.has_fluid else None
         self.fluid_count = 0 if fluid is None else int(fluid[1])
+        self.bell_vertices = (
+            int(result.dataset(fields.BELL_SURFACE_VERTICES).shape[1]) if self.has_bell else 0
+        )
+        self.bell_face_count = (
+            int(result.dataset(fields.BELL_SURFACE_FACES).shape[0]) if self.has_bell else 0
+        )
         look = scene_look(scene)
         self._meta: dict[str, Any] = {
             "name": str(scene.name),
@@ -131,14 +181,9 @@ class ResultData:
             },
             "bell": {
                 "present": self.has_bell,
-                "vertices": (
-                    int(result.dataset(fields.BELL_SURFACE_VERTICES).shape[1])
-                    if self.has_bell
-                    else 0
-                ),
-                "faces": (
-                    int(result.dataset(fields.BELL_SURFACE_FACES).shape[0]) if self.has_bell else 0
-                ),
+                "vertices": self.bell_vertices,
+                "faces": self.bell_face_count,
+                "frame_bytes": self.frame_bytes("bell"),
             },
             "tentacles": {
                 "present": self.has_tentacles,
@@ -146,22 +191,40 @@ class ResultData:
                 "particles": self.particles,
                 "interpolation": self.interpolation,
                 "max_interpolation": self.max_interpolation,
+                "frame_bytes": self.frame_bytes("tentacles", 1),
             },
             "fluid": {
                 "present": self.has_fluid,
                 "particles": self.fluid_count,
                 "dimensions": 0 if fluid is None else int(fluid[2]),
                 "radius": fluid_radius(result) if self.has_fluid else 0.0,
+                "frame_bytes": self.frame_bytes("fluid"),
             },
             **self._bounds(),
         }
 
     def meta(self) -> dict[str, Any]:
         """``name``, ``fps``, ``frames``, ``complete``, ``time`` (F,) s, ``look`` (linear RGB
-        colours, m), ``bell``/``tentacles``/``fluid`` (present, sizes), ``bounds`` [[low],
-        [high]] m of the whole animation, ``extent`` m (the largest box of one frame) and
-        ``travels`` (whether the centre moves further than that: the page then follows it)."""
+        colours, m), ``bell``/``tentacles``/``fluid`` (present, sizes, ``frame_bytes``: one
+        frame's bytes, the tentacles' at one drawn per simulated), ``bounds`` [[low], [high]]
+        m of the whole animation, ``extent`` m (the largest box of one frame) and ``travels``
+        (whether the centre moves further than that: the page then follows it)."""
         return self._meta
+
+    def frame_bytes(self, part: str, interpolation: int = 1) -> int:
+        """Bytes of one frame of ``part`` as ``/frames`` sends it (0 for a part not there)."""
+        points = {
+            "bell": self.bell_vertices,
+            "tentacles": self.simulated * interpolation * self.particles,
+            "fluid": self.fluid_count,
+        }[part]
+        return points * 3 * FLOAT32_BYTES
+
+    def bell_faces_bytes(self) -> int:
+        return self.bell_face_count * 3 * FLOAT32_BYTES
+
+    def fluid_kinds_bytes(self) -> int:
+        return self.fluid_count
 
     def _bounds(self) -> dict[str, Any]:
         result = self.result
@@ -213,8 +276,11 @@ class ResultData:
             return bytes(self.fluid_count)
         return self.result.fluid_kind.astype("<u1").tobytes()
 
-    def chunk(self, part: str, start: int, count: int, interpolation: int | None) -> bytes:
-        """Frames ``start`` to ``start + count - 1`` of ``part`` as little-endian float32."""
+    def frame_request(
+        self, part: str, start: int, count: int, interpolation: int | None
+    ) -> FrameRequest:
+        """The query checked, nothing read: ValueError for a bad one, LookupError for a part
+        the result does not have."""
         if part not in PARTS:
             raise ValueError(f"part={part}: expected one of {', '.join(PARTS)}")
         if not (0 <= start < self.frames and 1 <= count <= MAX_CHUNK_FRAMES):
@@ -222,24 +288,34 @@ class ResultData:
                 f"start={start}, count={count}: the result has frames 0 to {self.frames - 1}, "
                 f"at most {MAX_CHUNK_FRAMES} per request"
             )
-        stop = min(self.frames, start + count)
-        if part == "bell":
-            if not self.has_bell:
-                raise LookupError("the result has no bell")
-            data = self.result.read(fields.BELL_SURFACE_VERTICES, slice(start, stop))
-        elif part == "fluid":
-            if not self.has_fluid:
-                raise LookupError("the result has no fluid")
-            data = self._fluid_world(slice(start, stop))
-        else:
-            if not self.has_tentacles:
-                raise LookupError("the result has no tentacles")
+        present = {"bell": self.has_bell, "tentacles": self.has_tentacles, "fluid": self.has_fluid}
+        if not present[part]:
+            raise LookupError(f"the result has no {'tentacles' if part == 'tentacles' else part}")
+        factor = 1
+        if part == "tentacles":
             factor = self.interpolation if interpolation is None else interpolation
             if not 1 <= factor <= self.max_interpolation:
                 raise ValueError(f"interpolation={factor}: expected 1 to {self.max_interpolation}")
+        return FrameRequest(part, start, min(self.frames, start + count), factor)
+
+    def chunk_bytes(self, request: FrameRequest) -> int:
+        """The size of :meth:`chunk`'s answer, known before it is built."""
+        return (request.stop - request.start) * self.frame_bytes(
+            request.part, request.interpolation
+        )
+
+    def chunk(self, request: FrameRequest) -> bytes:
+        """The frames of ``request`` as little-endian float32."""
+        frames = slice(request.start, request.stop)
+        if request.part == "bell":
+            data = self.result.read(fields.BELL_SURFACE_VERTICES, frames)
+        elif request.part == "fluid":
+            data = self._fluid_world(frames)
+        else:
             from jellysim.interpolation import interpolate_result
 
-            data = interpolate_result(self.result, factor, frames=(start, stop))
+            window = (request.start, request.stop)
+            data = interpolate_result(self.result, request.interpolation, frames=window)
         return np.ascontiguousarray(data, dtype="<f4").tobytes()
 
 
@@ -252,20 +328,85 @@ def _import_map_hash(page: str) -> str:
     return "'sha256-" + base64.b64encode(digest).decode("ascii") + "'"
 
 
+class RequestBudget:
+    """Data requests being answered, counted per client address and in all: a request that
+    would go beyond either count is not answered now (429) instead of waiting in a thread."""
+
+    def __init__(self, per_client: int, total: int) -> None:
+        self.per_client = per_client
+        self.total = total
+        self.refused = 0  # requests turned away so far
+        self._busy: dict[str, int] = {}
+        self._answering = 0
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def slot(self, client: str) -> Iterator[bool]:
+        """Whether a request of ``client`` may be answered now; if so its slot is held until
+        the block ends (the answer sent)."""
+        with self._lock:
+            busy = self._busy.get(client, 0)
+            granted = busy < self.per_client and self._answering < self.total
+            if granted:
+                self._busy[client] = busy + 1
+                self._answering += 1
+            else:
+                self.refused += 1
+        try:
+            yield granted
+        finally:
+            if granted:
+                with self._lock:
+                    self._answering -= 1
+                    self._busy[client] -= 1
+                    if self._busy[client] == 0:
+                        del self._busy[client]
+
+
 class ViewServer(ThreadingHTTPServer):
-    """Serves one result's page and data on ``(host, port)`` (port 0: a free one)."""
+    """Serves one result's page and data on ``(host, port)`` (port 0: a free one) within
+    ``limits``; the page's address, :attr:`page_url`, carries the session's token."""
 
     daemon_threads = True
 
-    def __init__(self, data: ResultData, web_modules: Path, host: str, port: int) -> None:
+    def __init__(
+        self,
+        data: ResultData,
+        web_modules: Path,
+        host: str,
+        port: int,
+        limits: ViewLimits | None = None,
+    ) -> None:
         self.data = data
-        self.files: dict[str, Path] = {"/": STATIC / "index.html"}
+        self.limits = ViewLimits() if limits is None else limits
+        self.token = secrets.token_urlsafe(32)
+        self.budget = RequestBudget(self.limits.requests_per_client, self.limits.data_requests)
+        self.open_connections = 0
+        self._connections_lock = threading.Lock()
+        full = f"jellysim view: {self.limits.connections} connections are open already\n"
+        self._connections_full = (
+            "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain; charset=utf-8\r\n"
+            f"Content-Length: {len(full)}\r\nRetry-After: {RETRY_AFTER_S}\r\n"
+            f"Connection: close\r\n\r\n{full}"
+        ).encode("ascii")
+        self.meta_body = json.dumps(
+            {
+                **data.meta(),
+                "limits": {
+                    "max_response_bytes": self.limits.max_response_bytes,
+                    "max_frames_per_request": MAX_CHUNK_FRAMES,
+                    "requests_per_client": self.limits.requests_per_client,
+                },
+            }
+        ).encode("utf-8")
+        page = (STATIC / "index.html").read_text(encoding="utf-8")
+        self.page = page.encode("utf-8")
+        self.files: dict[str, Path] = {}
         for path in sorted(STATIC.iterdir()):
             if path.is_file() and path.suffix in CONTENT_TYPES:
                 self.files[f"/static/{path.name}"] = path
         for served, relative in THREE_FILES.items():
             self.files[served] = web_modules / relative
-        page = (STATIC / "index.html").read_text(encoding="utf-8")
         self.policy = (
             "default-src 'self'; "
             f"script-src 'self' {_import_map_hash(page)}; "
@@ -291,6 +432,45 @@ class ViewServer(ThreadingHTTPServer):
             host = f"[{host}]"
         return f"http://{host}:{port}/"
 
+    @property
+    def page_url(self) -> str:
+        """The page's address with this session's token: what the user opens."""
+        return f"{self.url}?token={quote(self.token)}"
+
+    def token_matches(self, given: str) -> bool:
+        return hmac.compare_digest(given.encode("utf-8"), self.token.encode("ascii"))
+
+    # A thread per connection (ThreadingMixIn), at most limits.connections of them: a
+    # connection beyond is answered 503 and closed without a thread.
+    def process_request(self, request: Any, client_address: Any) -> None:
+        with self._connections_lock:
+            admitted = self.open_connections < self.limits.connections
+            if admitted:
+                self.open_connections += 1
+        if not admitted:
+            try:
+                request.setblocking(False)  # a fresh socket's buffer takes these few bytes
+                request.send(self._connections_full)
+            except OSError:
+                pass
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._connection_closed()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._connection_closed()
+
+    def _connection_closed(self) -> None:
+        with self._connections_lock:
+            self.open_connections -= 1
+
 
 def _is_loopback(host: str) -> bool:
     if host == "localhost":
@@ -301,25 +481,53 @@ def _is_loopback(host: str) -> bool:
         return False
 
 
+# A data route's plan: the answer's size in bytes (known before it is built), a function that
+# builds it, and its content type. A route raises ValueError for a bad query, LookupError for
+# something the result does not have.
+Planned = tuple[int, Callable[[], bytes], str]
+Route = Callable[["_Handler", dict[str, list[str]]], Planned]
+BINARY = "application/octet-stream"
+
+
 class _Handler(BaseHTTPRequestHandler):
     server: ViewServer
     protocol_version = "HTTP/1.1"
 
+    def setup(self) -> None:
+        super().setup()
+        # Every read (waiting for a request included) and every answer's send give up after
+        # idle_timeout: http.server then closes the connection and its thread ends.
+        self.connection.settimeout(self.server.limits.idle_timeout)
+
     def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 (the base's name)
         """Quiet: the page reports its own errors."""
 
-    def _send(self, status: int, body: bytes, content_type: str, cache: bool = False) -> None:
-        self.send_response(status)
-        self.send_header("Content-Type", content_type)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "max-age=3600" if cache else "no-store")
-        self.send_header("X-Content-Type-Options", "nosniff")
-        self.send_header("Content-Security-Policy", self.server.policy)
-        self.end_headers()
-        self.wfile.write(body)
+    def _send(
+        self,
+        status: int,
+        body: bytes,
+        content_type: str,
+        cache: bool = False,
+        retry: bool = False,
+    ) -> None:
+        try:
+            self.send_response(status)
+            self.send_header("Content-Type", content_type)
+            self.send_header("Content-Length", str(len(body)))
+            self.send_header("Cache-Control", "max-age=3600" if cache else "no-store")
+            self.send_header("X-Content-Type-Options", "nosniff")
+            self.send_header("Referrer-Policy", "no-referrer")
+            self.send_header("Content-Security-Policy", self.server.policy)
+            if retry:
+                self.send_header("Retry-After", str(RETRY_AFTER_S))
+            self.end_headers()
+            self.wfile.write(body)
+        except OSError:  # the page moved on (a scrub), or stopped reading (idle_timeout)
+            self.close_connection = True
 
-    def _fail(self, status: HTTPStatus, message: str) -> None:
-        self._send(status, (message + "\n").encode("utf-8"), "text/plain; charset=utf-8")
+    def _fail(self, status: HTTPStatus, message: str, retry: bool = False) -> None:
+        body = (message + "\n").encode("utf-8")
+        self._send(status, body, "text/plain; charset=utf-8", retry=retry)
 
     def _host_allowed(self) -> bool:
         """On a loopback address, only requests naming a loopback host (DNS rebinding)."""
@@ -328,61 +536,112 @@ class _Handler(BaseHTTPRequestHandler):
         host = urlsplit("//" + self.headers.get("Host", "")).hostname or ""
         return host in LOOPBACK_NAMES
 
+    def _refusal(self) -> str | None:
+        """Why a data request does not come from the viewer's own page, or None."""
+        site = self.headers.get("Sec-Fetch-Site")
+        if site is not None and site not in OWN_FETCH_SITES:
+            return f"refused: a {site} request (only the viewer's own page may ask)"
+        origin = self.headers.get("Origin")
+        if origin is not None and origin != f"http://{self.headers.get('Host', '')}":
+            return f"refused: a request from {origin} (only the viewer's own page may ask)"
+        if not self.server.token_matches(self.headers.get(TOKEN_HEADER, "")):
+            return f"refused: no valid {TOKEN_HEADER} (open the address jellysim view printed)"
+        return None
+
     def do_GET(self) -> None:  # noqa: N802 (http.server's name)
         url = urlsplit(self.path)
+        query = parse_qs(url.query)
         try:
             if not self._host_allowed():
                 self._fail(HTTPStatus.FORBIDDEN, "jellysim view answers to localhost only")
+            elif url.path == "/":
+                if self.server.token_matches(query.get("token", [""])[-1]):
+                    self._send(HTTPStatus.OK, self.server.page, CONTENT_TYPES[".html"])
+                else:
+                    self._fail(
+                        HTTPStatus.FORBIDDEN,
+                        "open the address that jellysim view printed: it carries this "
+                        "session's token",
+                    )
             elif url.path in self.server.files:
                 path = self.server.files[url.path]
                 vendor = url.path.startswith("/vendor/")
                 self._send(HTTPStatus.OK, path.read_bytes(), CONTENT_TYPES[path.suffix], vendor)
             elif url.path in self._data_routes:
-                self._data_routes[url.path](self, parse_qs(url.query))
+                refusal = self._refusal()
+                if refusal is not None:
+                    self._fail(HTTPStatus.FORBIDDEN, refusal)
+                else:
+                    self._answer(self._data_routes[url.path], query)
             else:
                 self._fail(HTTPStatus.NOT_FOUND, f"not found: {url.path}")
-        except (BrokenPipeError, ConnectionResetError):
-            pass  # the page moved on (a scrub) before the answer arrived
         except Exception as err:  # one line to the page; the server keeps serving
             self._fail(HTTPStatus.INTERNAL_SERVER_ERROR, f"{type(err).__name__}: {err}")
 
-    def _meta(self, query: dict[str, list[str]]) -> None:
-        body = json.dumps(self.server.data.meta()).encode("utf-8")
-        self._send(HTTPStatus.OK, body, "application/json")
-
-    def _binary(self, make: Callable[[], bytes]) -> None:
+    def _answer(self, route: Route, query: dict[str, list[str]]) -> None:
+        """A data route's answer within the limits: its size checked before it is built, and
+        built only while the client and the server have a slot free."""
         try:
-            body = make()
+            size, make, content_type = route(self, query)
         except LookupError as err:
             self._fail(HTTPStatus.NOT_FOUND, str(err))
             return
         except ValueError as err:
             self._fail(HTTPStatus.BAD_REQUEST, str(err))
             return
-        self._send(HTTPStatus.OK, body, "application/octet-stream")
+        limits = self.server.limits
+        if size > limits.max_response_bytes:
+            self._fail(
+                HTTPStatus.REQUEST_ENTITY_TOO_LARGE,
+                f"the answer would be {size} bytes, over the {limits.max_response_bytes} one "
+                "answer may carry: ask for fewer frames",
+            )
+            return
+        with self.server.budget.slot(self.client_address[0]) as granted:
+            if not granted:
+                self._fail(
+                    HTTPStatus.TOO_MANY_REQUESTS,
+                    f"busy: at most {limits.requests_per_client} data requests at once from one "
+                    f"client and {limits.data_requests} in all; retry after {RETRY_AFTER_S} s",
+                    retry=True,
+                )
+                return
+            body = make()
+            if len(body) != size:
+                raise RuntimeError(f"an answer of {len(body)} bytes where {size} were planned")
+            self._send(HTTPStatus.OK, body, content_type)
 
-    def _bell_faces(self, query: dict[str, list[str]]) -> None:
-        self._binary(self.server.data.bell_faces)
+    def _meta(self, query: dict[str, list[str]]) -> Planned:
+        body = self.server.meta_body
+        return len(body), lambda: body, "application/json"
 
-    def _fluid_kinds(self, query: dict[str, list[str]]) -> None:
-        self._binary(self.server.data.fluid_kinds)
+    def _bell_faces(self, query: dict[str, list[str]]) -> Planned:
+        data = self.server.data
+        if not data.has_bell:
+            raise LookupError("the result has no bell")
+        return data.bell_faces_bytes(), data.bell_faces, BINARY
 
-    def _frames(self, query: dict[str, list[str]]) -> None:
-        def make() -> bytes:
-            values = {key: query.get(key, [""])[-1] for key in ("part", "start", "count")}
-            factor = query.get("interpolation", [None])[-1]
-            try:
-                start, count = int(values["start"]), int(values["count"])
-                interpolation = None if factor is None else int(factor)
-            except ValueError:
-                raise ValueError(
-                    "expected /frames?part=P&start=S&count=C[&interpolation=N], integers"
-                ) from None
-            return self.server.data.chunk(values["part"], start, count, interpolation)
+    def _fluid_kinds(self, query: dict[str, list[str]]) -> Planned:
+        data = self.server.data
+        if not data.has_fluid:
+            raise LookupError("the result has no fluid")
+        return data.fluid_kinds_bytes(), data.fluid_kinds, BINARY
 
-        self._binary(make)
+    def _frames(self, query: dict[str, list[str]]) -> Planned:
+        values = {key: query.get(key, [""])[-1] for key in ("part", "start", "count")}
+        factor = query.get("interpolation", [None])[-1]
+        try:
+            start, count = int(values["start"]), int(values["count"])
+            interpolation = None if factor is None else int(factor)
+        except ValueError:
+            raise ValueError(
+                "expected /frames?part=P&start=S&count=C[&interpolation=N], integers"
+            ) from None
+        data = self.server.data
+        request = data.frame_request(values["part"], start, count, interpolation)
+        return data.chunk_bytes(request), lambda: data.chunk(request), BINARY
 
-    _data_routes: dict[str, Callable[[_Handler, dict[str, list[str]]], None]] = {
+    _data_routes: dict[str, Route] = {
         "/meta.json": _meta,
         "/bell-faces": _bell_faces,
         "/fluid-kinds": _fluid_kinds,
@@ -396,17 +655,19 @@ def serve(
     port: int = 0,
     browser: bool = True,
     ready: Callable[[ViewServer], None] | None = None,
+    limits: ViewLimits | None = None,
 ) -> int:
-    """Serve the result in ``folder`` until Ctrl-C (exit status 0), printing the address and
-    opening the default browser unless ``browser`` is False. ``ready`` is called with the
-    listening server (tests stop it with ``server.shutdown()``)."""
+    """Serve the result in ``folder`` until Ctrl-C (exit status 0), printing the page's address
+    (with the session's token) and opening it in the default browser unless ``browser`` is
+    False. ``ready`` is called with the listening server (tests stop it with
+    ``server.shutdown()``); ``limits`` default to :class:`ViewLimits`'."""
     if not 0 <= port <= 65535:
         raise InputError(f"--port {port}: expected 0 (a free port) to 65535")
     with open_result(folder) as result:
         web_modules = find_web_modules()
-        server = ViewServer(ResultData(result), web_modules, host, port)
+        server = ViewServer(ResultData(result), web_modules, host, port, limits)
         try:
-            url = server.url
+            url = server.page_url
             print(f"jellysim view: serving {folder} at {url} (Ctrl-C to stop)", flush=True)
             if browser:  # in a daemon thread: a text-mode browser may block
                 threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()

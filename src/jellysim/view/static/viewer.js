@@ -3,7 +3,7 @@
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
-import { CHUNK, FrameStore, fetchBellFaces, fetchFluidKinds, fetchMeta } from "./data.js";
+import { FrameStore, fetchBellFaces, fetchFluidKinds, fetchMeta } from "./data.js";
 
 const VIEW_DIRECTION = new THREE.Vector3(0, 1, -0.25).normalize(); // as jellysim render's camera
 const KIND_COLORS = [
@@ -354,10 +354,9 @@ async function main() {
       $("status").textContent = waiting ? "loading…" : `${meta.name}${meta.complete ? "" : " (incomplete run)"}`;
     }
     // Read ahead: the next chunk (wrapping to the start) of every part shown.
-    const ahead = (Math.floor(frame / CHUNK) + 1) % Math.ceil(meta.frames / CHUNK);
     for (const part of ["bell", "tentacles", "fluid"]) {
       if (meta[part].present && (part !== "fluid" || fluid.visible)) {
-        store.load(part, ahead, state.interpolation);
+        store.loadAfter(part, frame, state.interpolation);
       }
     }
     controls.update();
