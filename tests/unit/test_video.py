@@ -104,6 +104,21 @@ def test_gif_has_every_frame_and_can_be_scaled_down(frames, tmp_path):
         assert (info["codec"], info["frames"]) == ("gif", FRAMES)
 
 
+def test_a_gif_above_50_fps_keeps_every_kth_frame_and_the_duration(frames, tmp_path):
+    # GIF counts delays in hundredths of a second: 200 fps (the dam break's) cannot be stored,
+    # and ffmpeg refused it ("Non-monotonic DTS") before every 4th frame was kept.
+    folder, _, _ = frames
+    out = encode_gif(folder, tmp_path / "fast.gif", 200.0)
+    with Image.open(out) as gif:
+        assert gif.n_frames == FRAMES // 4
+        durations = []
+        for index in range(gif.n_frames):
+            gif.seek(index)
+            durations.append(gif.info["duration"])
+    assert durations == [20] * (FRAMES // 4)  # 50 fps
+    assert sum(durations) == pytest.approx(1000.0 * FRAMES / 200.0)
+
+
 def test_a_frame_ffmpeg_cannot_decode_fails_with_its_last_lines_and_leaves_nothing(tmp_path):
     folder = write_frames(tmp_path / "frames", 64, 48)
     frame = folder / "frame_00005.png"

@@ -20,6 +20,7 @@ succeeds, so a failed or interrupted encoding never leaves a truncated video und
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -39,6 +40,8 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 STDERR_TAIL_LINES = 15  # lines of ffmpeg's stderr quoted in a VideoError
 X264_PRESET, X264_CRF = "medium", 18  # visually near-lossless, modest files
 GIF_DITHER = "sierra2_4a"
+# GIF frame delays are whole hundredths of a second, and browsers play delays under 2 as 10.
+GIF_MAX_FPS = 50.0
 
 
 class VideoError(JellysimError):
@@ -158,11 +161,16 @@ def encode_gif(frames: Frames, out: Path, fps: float, width: int | None = None) 
     Two passes: the first builds one 256-colour palette from all frames (``palettegen``), the
     second maps the frames to it with ``sierra2_4a`` error diffusion (``paletteuse``). GIF
     stores frame delays in hundredths of a second: at rates that do not divide 100 the delays
-    alternate (8 and 9 at 12 fps) so that the total duration stays right.
+    alternate (8 and 9 at 12 fps) so that the total duration stays right. Above
+    ``GIF_MAX_FPS`` only every k-th frame is kept, k = ceil(fps / GIF_MAX_FPS), played at fps / k
+    (a 200 fps dam break becomes a 50 fps GIF of every 4th frame, as long as the MP4).
     """
     files = frame_files(frames)
     frame_size(files)
-    rate = frame_rate(fps)
+    frame_rate(fps)  # refuses fps <= 0
+    step = max(1, math.ceil(fps / GIF_MAX_FPS))
+    files = files[::step]
+    rate = frame_rate(fps / step)
     scale = f"scale={int(width)}:-1:flags=lanczos," if width else ""
     with tempfile.TemporaryDirectory(prefix="jellysim-gif-") as folder:
         palette = Path(folder) / "palette.png"
