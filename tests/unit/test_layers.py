@@ -21,7 +21,7 @@ LAYERS: list[set[str]] = [
     {"tentacle", "fluid", "bell", "interpolation"},  # physics and render-time geometry
     {"coupling"},  # bodies joined: the bell in its water, the recorded margin
     {"io"},  # result store, checkpoints, figures
-    {"simulation", "render"},  # frame loops and runs; pictures
+    {"simulation", "render"},  # frame loops, runs and their cost estimate (estimate.py); pictures
     {"studies", "export", "view"},  # sweeps, files for other tools, the viewer
     {"cli", "__main__", FACE},  # the command line and the Python API face
 ]

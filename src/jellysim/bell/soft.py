@@ -81,6 +81,28 @@ def build_springs(
     )
 
 
+def explicit_spring_dt(stiffness_sum: float, mass: float) -> float:
+    """The explicit stage's limit for springs (s) on particles of ``mass`` (kg) whose spring
+    constants sum to at most ``stiffness_sum`` (N/m) at a particle: ``SPRING_SAFETY x 2 /
+    omega``, ``omega^2 = 4 stiffness_sum / m``, twice the block Gershgorin bound on the stiffness
+    matrix's largest eigenvalue (each spring's 3 x 3 block ``k e e^T`` has norm k, so
+    ``omega_max^2 <= max_i 2 sum_e k_e / m`` whatever the springs' directions):
+    docs/theory/soft-bell.md §4."""
+    omega = math.sqrt(4.0 * stiffness_sum / mass)
+    return SPRING_SAFETY * 2.0 / omega if omega > 0 else math.inf
+
+
+def margin_forcing(scene: Scene) -> Forcing:
+    """The scales of a margin that loses ``bell.muscle_ratio`` of its radius each pulse (the
+    soft bell's root driver's forcing, known from the scene alone)."""
+    b = scene.bell
+    if b.muscle_ratio == 0.0:
+        return NO_FORCING
+    slope, curvature, period = waveform_peaks(b.waveform, b.jet_fraction)
+    swing = b.radius * b.muscle_ratio
+    return Forcing(swing * slope / b.period, swing * curvature / b.period**2, period * b.period)
+
+
 class BellShape:
     """The bell's rest shape (Eq. B7): ``centre`` (3,) m of the margin plane on the axis,
     ``radius`` R and ``height`` H (m), ``wall`` w (m)."""
@@ -123,6 +145,7 @@ class SoftBell:
         self.muscle_ratio, self.muscle_stiffening = b.muscle_ratio, b.muscle_stiffening
         self.mass = scene.water.density * l0**3
         self.integration = b.spring_integration
+        self._forcing = margin_forcing(scene)
 
         _, height, _ = shape.cylindrical(rest)
         band = height < b.muscle_band * b.height
@@ -220,26 +243,15 @@ class SoftBell:
 
     def stable_dt(self, activation: float = 1.0) -> float:
         """The explicit stage's limit for the springs (s) with the muscle at ``activation`` (the
-        run uses full stiffening throughout): ``SPRING_SAFETY x 2 / omega``, ``omega^2 = max_i 4
-        sum_e k_e / m``, twice the block Gershgorin bound on the stiffness matrix's largest
-        eigenvalue (each spring's 3 x 3 block ``k e e^T`` has norm k, so ``omega_max^2 <= max_i
-        2 sum_e k_e / m`` whatever the springs' directions): docs/theory/soft-bell.md §4."""
+        run uses full stiffening throughout): :func:`explicit_spring_dt` of the largest sum of
+        spring constants at a particle, the muscle's stiffened."""
         factor = 1.0 + max(self.muscle_stiffening - 1.0, 0.0) * activation
         total = self._passive_total + factor * self._muscle_total
-        omega = math.sqrt(4.0 * float(total.max(initial=0.0)) / self.mass)
-        return SPRING_SAFETY * 2.0 / omega if omega > 0 else math.inf
+        return explicit_spring_dt(float(total.max(initial=0.0)), self.mass)
 
     def forcing(self) -> Forcing:
         """The scales of a margin that loses ``muscle_ratio`` of its radius each pulse."""
-        if self.muscle_ratio == 0.0:
-            return NO_FORCING
-        slope, curvature, period = waveform_peaks(self.waveform, self.jet_fraction)
-        swing = self.shape.radius * self.muscle_ratio
-        return Forcing(
-            swing * slope / self.period,
-            swing * curvature / self.period**2,
-            period * self.period,
-        )
+        return self._forcing
 
     def static_datasets(self) -> dict[str, tuple[np.ndarray, str]]:
         """The body's topology and rest state, written once."""

@@ -47,6 +47,11 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--resume", action="store_true", help="continue a killed run")
     run.add_argument("--force", action="store_true", help="replace an existing result")
     run.add_argument("--quiet", action="store_true", help="no progress and no messages")
+    run.add_argument(
+        "--no-estimate-check",
+        action="store_true",
+        help="run even when the estimated memory or disk exceeds what the machine has",
+    )
 
     plot = sub.add_parser("plot", help="the paper's figures for a result")
     plot.add_argument("dir", help="folder holding result.h5")
@@ -140,7 +145,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene, args.overrides)
     if not args.quiet:
         logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
-    result = run(scene, args.out, force=args.force, resume=args.resume, quiet=args.quiet)
+    result = run(
+        scene,
+        args.out,
+        force=args.force,
+        resume=args.resume,
+        quiet=args.quiet,
+        estimate_check=not args.no_estimate_check,
+    )
     with result:
         if not args.quiet:
             print(f"wrote {result.path} ({result.frames} frames)")

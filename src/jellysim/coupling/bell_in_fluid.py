@@ -23,7 +23,7 @@ from jellysim.coupling.margin import RecordedMargin
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.mps import MPSSolver
+from jellysim.fluid.mps import MPSParameters, MPSSolver
 from jellysim.fluid.setup import fluid_particles, mps_parameters
 
 # kappa of the fluid's acceleration limit under gravity, dt <= kappa sqrt(l0 / g): gravity moves a
@@ -33,6 +33,25 @@ from jellysim.fluid.setup import fluid_particles, mps_parameters
 # pulse is lost. kappa in [0.0348, 0.0356) gives both the coarse test's 18 steps and the preset's
 # measured 12 (l0 = 0.16 m, 1/20 s frames).
 STILL_WATER_ACCELERATION_NUMBER = 0.035
+
+
+def water_parameters(scene: Scene) -> MPSParameters:
+    """The MPS parameters of the soft bell's water.
+
+    Weightless water has nothing to fall: the fluid's speed alone sets the CFL step. Under
+    gravity the water starts at rest and stays there, but without a bound the first step from
+    rest is a whole 0.05 s frame at the preset's resolution and the surface is thrown off at
+    50 m/s within 0.25 s. The bound is on gravity's work in a step: dt <= kappa sqrt(l0 / g),
+    a particle at rest falling g dt^2 / 2 = kappa^2 l0 / 2 before the pressure holds it, with
+    kappa = STILL_WATER_ACCELERATION_NUMBER (docs/soft-bell.md, "The time step under
+    gravity"). The fluid-only scenes' free fall over the water's height, sqrt(2 g H), would
+    take 17 steps a frame at the preset's resolution instead of 12.
+    """
+    return dataclasses.replace(
+        mps_parameters(scene),
+        free_fall_floor=False,
+        acceleration_number=STILL_WATER_ACCELERATION_NUMBER,
+    )
 
 
 class BellInFluid:
@@ -52,19 +71,7 @@ class BellInFluid:
         self.fluid_rows = np.concatenate(
             [np.arange(len(water)), np.arange(self.bell_rows.stop, len(order))]
         )
-        # Weightless water has nothing to fall: the fluid's speed alone sets the CFL step. Under
-        # gravity the water starts at rest and stays there, but without a bound the first step from
-        # rest is a whole 0.05 s frame at the preset's resolution and the surface is thrown off at
-        # 50 m/s within 0.25 s. The bound is on gravity's work in a step: dt <= kappa sqrt(l0 / g),
-        # a particle at rest falling g dt^2 / 2 = kappa^2 l0 / 2 before the pressure holds it, with
-        # kappa = STILL_WATER_ACCELERATION_NUMBER (docs/soft-bell.md, "The time step under
-        # gravity"). The fluid-only scenes' free fall over the water's height, sqrt(2 g H), would
-        # take 17 steps a frame at the preset's resolution instead of 12.
-        params = dataclasses.replace(
-            mps_parameters(scene),
-            free_fall_floor=False,
-            acceleration_number=STILL_WATER_ACCELERATION_NUMBER,
-        )
+        params = water_parameters(scene)
         self.solver = MPSSolver(params, positions[order], kinds[order])
         l0 = params.l0
         self.body = SoftBell(scene, shape, rest)

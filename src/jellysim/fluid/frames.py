@@ -15,6 +15,19 @@ from jellysim.fluid.solvers import FluidDiverged
 # Called before each step with (time, dt) in s: the external force density (N, D) N/m3, or None.
 ExternalForce = Callable[[float, float], "np.ndarray | None"]
 
+# The most MPS steps a frame may take, as the tentacles have theirs (tentacle.model.
+# MAX_SUBSTEPS_PER_FRAME): a scene whose fluid needs more from the start is refused before it runs
+# (jellysim.simulation.estimate), and a fluid whose stable step shrinks past it in a run has run
+# away. An MPS step costs about 10 us a particle on two cores (docs/decisions.md, issue 24): ten
+# thousand steps of the smallest preset's 900 particles take about 90 s a frame.
+MAX_STEPS_PER_FRAME = 10_000
+
+
+def steps_per_frame(frame_dt: float, dt: float) -> int:
+    """The equal steps (:func:`jellysim.fluid.mps.substep`) of at most ``dt`` (s) that cover a
+    frame of ``frame_dt`` (s)."""
+    return max(1, math.ceil(frame_dt / dt - 1e-9))
+
 
 @dataclass
 class FrameStats:
@@ -45,10 +58,20 @@ def advance_to(
 ) -> None:
     """Step ``solver`` to the time ``end`` (s) in equal steps of at most its stable dt and
     ``dt_limit`` (s) (:func:`jellysim.fluid.mps.substep`), landing on ``end`` exactly; the frame's
-    figures go into ``stats``. A diverged pressure solve raises SimulationUnstable."""
+    figures go into ``stats``. A diverged pressure solve, or a stable step so short that the
+    rest of the frame would take more than :data:`MAX_STEPS_PER_FRAME` steps, raises
+    SimulationUnstable."""
     iterations, residual, steps = 0, 0.0, 0
     while solver.time < end - 1e-12 * frame_dt:
-        dt = substep(end - solver.time, min(solver.stable_dt(), dt_limit))
+        limit = min(solver.stable_dt(), dt_limit)
+        if end - solver.time > MAX_STEPS_PER_FRAME * limit:
+            raise SimulationUnstable(
+                f"the fluid ran away at t = {solver.time:.6g} s: its stable step fell to "
+                f"{limit:.3g} s, more than {MAX_STEPS_PER_FRAME} steps for the rest of the frame; "
+                "lower fluid.courant or refine fluid.spacing",
+                time=solver.time,
+            )
+        dt = substep(end - solver.time, limit)
         force = external_force(solver.time, dt) if external_force is not None else None
         try:
             step = solver.step(dt, force)

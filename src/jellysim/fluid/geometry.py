@@ -46,6 +46,10 @@ FLUID, WALL, DUMMY = 0, 1, 2  # particle kinds (stored as int8)
 LATTICES = ("square", "hexagonal", "fcc")
 # vertical spacing of the rows (2-D) or layers (3-D) over l0
 ROW_HEIGHT = {"square": 1.0, "hexagonal": 0.5 * np.sqrt(3.0), "fcc": np.sqrt(2.0 / 3.0)}
+# the area (2-D) or volume (3-D) each site stands for, over l0^D: the row spacing of the
+# hexagonal lattice, the row and layer spacings of the fcc one
+SITE_VOLUME = {"square": 1.0, "hexagonal": 0.5 * np.sqrt(3.0), "fcc": np.sqrt(0.5)}
+WALL_LAYERS, DUMMY_LAYERS = 1, 2  # a tank's layers of wall and dummy particles behind its faces
 DIMENSIONS = {"hexagonal": 2, "fcc": 3}  # lattices that exist in one dimension only
 
 _TOLERANCE = 1e-9  # in l0: cell centres on a block's boundary count as inside
@@ -64,8 +68,8 @@ def tank(
     l0: float,
     dim: int = 2,
     inner_depth: float | None = None,
-    wall_layers: int = 1,
-    dummy_layers: int = 2,
+    wall_layers: int = WALL_LAYERS,
+    dummy_layers: int = DUMMY_LAYERS,
     lattice: str = "square",
 ) -> tuple[np.ndarray, np.ndarray]:
     """An open-top tank: ``(positions (N, dim) m float64, kinds (N,) int8)``.

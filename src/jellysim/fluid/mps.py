@@ -188,6 +188,11 @@ class MPSParameters:
         return 4.0 if self.dim == 2 else 3.1
 
     @property
+    def neighbour_radius(self) -> float:
+        """The neighbour lists' radius in units of l0: the largest of the three r_e."""
+        return max(self.re_number_density, self.re_gradient, self.laplacian_radius)
+
+    @property
     def gravity_vector(self) -> np.ndarray:
         """Gravity (dim,) m/s2."""
         if self.gravity is None:
@@ -238,6 +243,45 @@ def lattice_reference(dim: int, l0: float, re: float, lattice: str = "square") -
     r = norm[(norm > 0) & (norm < re - 1e-9)] * l0
     w = re * l0 / r - 1.0
     return LatticeReference(float(w.sum()), float((w * r * r).sum() / w.sum()), int(r.size))
+
+
+def step_limits(
+    params: MPSParameters,
+    speed: float | None,
+    height: float | None,
+    external_acceleration: float = 0.0,
+) -> dict[str, float]:
+    """The stability limits of the MPS step (s) by name, for fluid particles whose largest speed
+    is ``speed`` (m/s) and whose extent along gravity plus l0 is ``height`` (m); both None when
+    there is no live fluid particle (no Courant limit then):
+
+    - "Courant": ``courant l0 / u``, u = ``speed`` floored (``free_fall_floor``) at
+      ``sqrt(2 a H)`` with a = |g| + ``external_acceleration`` (m/s2, the largest external
+      force over density) and H = ``height``: the speed of a free fall over the fluid's height,
+      for water that can fall (a dam break); a filled tank, where nothing falls, needs no floor;
+    - "acceleration": ``kappa sqrt(l0 / a)`` with kappa = ``acceleration_number``, by default
+      ``sqrt(courant)``: the step in which a particle at rest moves courant l0 / 2;
+    - "viscosity": ``diffusion_number l0^2 / nu``.
+
+    :meth:`MPSSolver.stable_dt` takes the least; a run's estimate (``jellysim.simulation.
+    estimate``) reads them before any particle exists.
+    """
+    p = params
+    a = float(np.linalg.norm(p.gravity_vector)) + external_acceleration
+    limits: dict[str, float] = {}
+    if speed is not None and height is not None:
+        if p.free_fall_floor:
+            speed = max(speed, math.sqrt(2.0 * a * height))
+        if speed > 0.0:
+            limits["Courant"] = p.courant * p.l0 / speed
+    if a > 0.0:
+        if p.acceleration_number is None:
+            limits["acceleration"] = math.sqrt(p.courant * p.l0 / a)
+        else:
+            limits["acceleration"] = p.acceleration_number * math.sqrt(p.l0 / a)
+    if p.kinematic_viscosity > 0.0:
+        limits["viscosity"] = p.diffusion_number * p.l0**2 / p.kinematic_viscosity
+    return limits
 
 
 class PoissonSystem(NamedTuple):
@@ -324,9 +368,7 @@ class MPSSolver:
             density=params.density,
             kinematic_viscosity=params.kinematic_viscosity,
         )
-        self.search_radius = (
-            max(params.re_number_density, params.re_gradient, params.laplacian_radius) * l0
-        )
+        self.search_radius = params.neighbour_radius * l0
         n = positions.shape[0]
         self.position = positions.copy()
         self.velocity = np.zeros((n, dim))
@@ -371,39 +413,18 @@ class MPSSolver:
     # ------------------------------------------------------------------------------ time step
 
     def stable_dt(self, external_acceleration: float = 0.0) -> float:
-        """The largest step the stability limits allow (s), the least of:
-
-        - CFL: ``courant l0 / u``, u the largest fluid speed, floored (``free_fall_floor``) at
-          ``sqrt(2 a H)`` with a = |g| + ``external_acceleration`` (m/s2, the largest external
-          force over density) and H the fluid's extent along gravity: the speed of a free fall
-          over the fluid's height, for water that can fall (a dam break); a filled tank, where
-          nothing falls, needs no floor;
-        - acceleration: ``kappa sqrt(l0 / a)`` with kappa = ``acceleration_number``, by default
-          ``sqrt(courant)``: the step in which a particle at rest moves courant l0 / 2;
-        - viscosity: ``diffusion_number l0^2 / nu``.
-        """
+        """The largest step the stability limits allow (s): the least of :func:`step_limits`
+        for the live fluid particles' largest speed and their extent along gravity."""
         p = self.params
         fluid = self.alive & (self.kind == FLUID)
-        a = float(np.linalg.norm(p.gravity_vector)) + external_acceleration
-        limits = [math.inf]
+        speed = height = None
         if fluid.any():
             speed = float(np.sqrt((self.velocity[fluid] ** 2).sum(axis=1)).max())
             g = p.gravity_vector
             axis = g / np.linalg.norm(g) if np.any(g) else np.eye(p.dim)[-1]
             along = self.position[fluid] @ axis
             height = float(along.max() - along.min()) + p.l0
-            if p.free_fall_floor:
-                speed = max(speed, math.sqrt(2.0 * a * height))
-            if speed > 0.0:
-                limits.append(p.courant * p.l0 / speed)
-        if a > 0.0:
-            if p.acceleration_number is None:
-                limits.append(math.sqrt(p.courant * p.l0 / a))
-            else:
-                limits.append(p.acceleration_number * math.sqrt(p.l0 / a))
-        if p.kinematic_viscosity > 0.0:
-            limits.append(p.diffusion_number * p.l0**2 / p.kinematic_viscosity)
-        return min(limits)
+        return min(step_limits(p, speed, height, external_acceleration).values(), default=math.inf)
 
     def step(self, dt: float, external_force: np.ndarray | None = None) -> StepStats:
         """Advance the fluid by ``dt`` (s), in place.
@@ -803,5 +824,6 @@ __all__ = [
     "MPSSolver",
     "StepStats",
     "lattice_reference",
+    "step_limits",
     "substep",
 ]

@@ -34,6 +34,11 @@ from jellysim.fields import Dataset, Field
 
 RESULT_FILE = "result.h5"
 
+# The writer holds frames in memory until this many are buffered or this much wall time has
+# passed since the last flush.
+BATCH_FRAMES = 32
+BATCH_SECONDS = 1.0
+
 # Which frames to read: one (int), a slice (step >= 1), or increasing indices.
 Frames = int | slice | Sequence[int]
 
@@ -61,6 +66,17 @@ def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[D
         fields.BELL_RIM_VELOCITY.dataset(T=tentacles),
         fields.BELL_MARGIN.dataset(R=margin_points),
     ]
+
+
+def frame_bytes(spec: Dataset) -> int:
+    """The bytes one frame of a per-frame dataset takes."""
+    return np.dtype(spec.dtype).itemsize * int(np.prod(spec.frame_shape))
+
+
+def chunk_rows(spec: Dataset) -> int:
+    """Frames per HDF5 chunk of a per-frame dataset: chunks of about 1 MiB, at most 64 frames.
+    A chunk takes its whole size on disk as soon as its first frame is written."""
+    return max(1, min(64, 2**20 // max(1, frame_bytes(spec))))
 
 
 _LIBC = ctypes.CDLL(None, use_errno=True)
@@ -112,8 +128,8 @@ class ResultWriter:
         datasets: list[Dataset],
         attributes: dict[str, Any],
         initial: dict[str, np.ndarray] | None = None,
-        batch_frames: int = 32,
-        batch_seconds: float = 1.0,
+        batch_frames: int = BATCH_FRAMES,
+        batch_seconds: float = BATCH_SECONDS,
         static: dict[str, tuple[np.ndarray, str]] | None = None,
         links: dict[str, str] | None = None,
     ) -> None:
@@ -133,13 +149,11 @@ class ResultWriter:
             for spec in datasets:
                 data = None if initial is None else initial[spec.path]
                 rows = 0 if data is None else data.shape[0]
-                frame_bytes = np.dtype(spec.dtype).itemsize * int(np.prod(spec.frame_shape))
-                chunk_rows = max(1, min(64, 2**20 // max(1, frame_bytes)))
                 ds = f.create_dataset(
                     spec.path,
                     shape=(rows, *spec.frame_shape),
                     maxshape=(None, *spec.frame_shape),
-                    chunks=(chunk_rows, *spec.frame_shape),
+                    chunks=(chunk_rows(spec), *spec.frame_shape),
                     dtype=spec.dtype,
                     data=data,
                     fletcher32=True,
@@ -165,9 +179,7 @@ class ResultWriter:
         self._file = f
         self._descriptor = int(f.id.get_vfd_handle())
         self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
-        self._frame_bytes = sum(
-            np.dtype(spec.dtype).itemsize * int(np.prod(spec.frame_shape)) for spec in datasets
-        )
+        self._frame_bytes = sum(frame_bytes(spec) for spec in datasets)
         self._buffer: dict[str, list[Any]] = {name: [] for name in self._datasets}
         self._batch_frames = batch_frames
         self._batch_seconds = batch_seconds

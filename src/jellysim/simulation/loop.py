@@ -133,7 +133,9 @@ def make_loop(scene: Scene) -> Simulation:
 
 class Simulation(ABC):
     """Any scene, frame by frame (:class:`FrameLoop`): ``Simulation(scene)`` builds the loop that
-    :func:`loop_name` names for it, an instance of the subclass registered under that name.
+    :func:`loop_name` names for it, an instance of the subclass registered under that name,
+    after refusing (InputError) a scene whose estimated memory exceeds what the machine has
+    available (:func:`jellysim.simulation.estimate.check_costs`).
 
     Every loop has ``scene``, ``frame`` and ``time``, ``observers`` (called with the loop after
     each frame) and ``step_frame()``; :class:`FrameLoop` lists the rest.
@@ -143,6 +145,10 @@ class Simulation(ABC):
 
     def __new__(cls, scene: Scene, *args: Any, **kwargs: Any) -> Simulation:
         if cls is Simulation:
+            # the public constructor refuses, before allocating, what the machine cannot hold
+            from jellysim.simulation.estimate import check_costs  # it imports this module
+
+            check_costs(scene)
             cls = LOOPS[loop_name(scene)]
         return super().__new__(cls)
 

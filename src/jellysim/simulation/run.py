@@ -27,6 +27,7 @@ from jellysim.io.checkpoint import (
 from jellysim.io.folders import output_folder, writing_lock
 from jellysim.io.result import RESULT_FILE, Result, read_frames
 from jellysim.progress import progress
+from jellysim.simulation.estimate import check_costs
 from jellysim.simulation.loop import FrameLoop, Observer, Simulation, make_loop
 
 log = logging.getLogger(__name__)
@@ -66,11 +67,15 @@ def run(
     resume: bool = False,
     quiet: bool = True,
     observers: list[Observer] | None = None,
+    estimate_check: bool = True,
 ) -> Result:
     """Run a scene to ``out/result.h5`` (default ``out/<name>``) and return the open result.
 
     ``force`` replaces an existing result; ``resume`` continues it from its last checkpoint.
     ``quiet=False`` shows a progress bar with ETA on runs longer than two seconds.
+    Before anything is allocated the run's memory, disk and time are estimated
+    (:mod:`jellysim.simulation.estimate`): beyond the machine's memory or the folder's free
+    space it is refused (InputError) unless ``estimate_check`` is False.
     """
     if not isinstance(scene, Scene) or overrides:
         scene = load_scene(scene if not isinstance(scene, os.PathLike) else str(scene), overrides)
@@ -86,6 +91,8 @@ def run(
     if resume and not result_path.exists():
         raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
 
+    replaced = result_path.stat().st_size if result_path.is_file() else 0  # or continued
+    check_costs(scene, folder, reclaimed=replaced, quiet=quiet, enforce=estimate_check)
     # From here a stop signal ends the run at the next frame boundary (setting up included).
     with _stop_signals() as stop:
         loop = make_loop(scene)
