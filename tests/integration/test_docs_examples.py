@@ -45,6 +45,7 @@ import subprocess
 import sys
 import time
 import tomllib
+import urllib.parse
 import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -54,6 +55,7 @@ import pytest
 
 import jellysim
 from jellysim.cli.main import _parser
+from jellysim.view.server import TOKEN_HEADER
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
@@ -83,6 +85,9 @@ NOT_RUN = {
     "PyElastica; benchmarks/ are run by hand, not by the suite",
     "ssh -L 8000:127.0.0.1:8000 remote": "needs a remote machine; the jellysim command it "
     "names ('view DIR --no-browser --port 8000') is run here from docs/viewer.md",
+    "python benchmarks/motion_report.py brown-jelly forced-tentacles": "benchmarks/ are run by "
+    "hand (whole preset runs); what it reports is tests/unit/test_motion.py's tentacle_motion, "
+    "run there on the forced tentacles",
 }
 
 TINY_DURATION = 0.004  # s of simulated time for every documented run ...
@@ -465,11 +470,15 @@ class Workspace:
                 f"stderr: {process.stderr.read() if process.poll() is not None else ''}"
             )
             url = line.split(" at ")[1].split()[0]
+            base, _, query = url.partition("?")
             if "--port" in argv:
-                assert url.endswith(f":{argv[argv.index('--port') + 1]}/"), line
+                assert base.endswith(f":{argv[argv.index('--port') + 1]}/"), line
             with urllib.request.urlopen(url, timeout=30) as page:
                 assert page.status == 200 and b"<html" in page.read().lower()
-            with urllib.request.urlopen(url + "meta.json", timeout=30) as meta:
+            # The page sends the session's token (in the printed address) with each data request.
+            token = urllib.parse.parse_qs(query)["token"][0]
+            request = urllib.request.Request(base + "meta.json", headers={TOKEN_HEADER: token})
+            with urllib.request.urlopen(request, timeout=30) as meta:
                 served = json.loads(meta.read())
             with jellysim.open_result(cwd / argv[1]) as result:
                 assert served["frames"] == result.frames

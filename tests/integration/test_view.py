@@ -248,7 +248,7 @@ def test_bad_input_exits_2_with_one_line(
 ) -> None:
     assert "not found" in _exit_2(capsys, str(tmp_path / "missing"))
     (tmp_path / "result.h5").write_text("not HDF5")
-    assert "cannot open" in _exit_2(capsys, str(tmp_path))
+    assert "not an HDF5 file" in _exit_2(capsys, str(tmp_path))
     assert "--port 70000" in _exit_2(capsys, str(brown.folder), "--port", "70000")
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
