@@ -324,7 +324,7 @@ def rest_shape_positions(
     out: np.ndarray,
 ) -> None:
     """The chain in its rest shape, into ``out`` (P, 3) m: the zero of :func:`curl_energy` plus
-    :func:`bending_energy`, Eq. (T14). The first segment leaves the root along the clamp
+    :func:`bending_energy`, Eq. (T10, T12). The first segment leaves the root along the clamp
     direction; then ``e_i = e_{i-1} + g_i`` with g_i in the frame transported along the chain as
     :func:`curl_forces` transports it, so the shape is the discrete energy's exact minimum."""
     for k in range(3):
