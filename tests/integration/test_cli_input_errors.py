@@ -75,6 +75,14 @@ SET_CASES = {
     "unreadable-value": (("--set", "duration=1.2.3"), ("duration", "1.2.3")),
     "nothing-to-resume": (("--resume",), ("nothing to resume", "result.h5")),
     "force-and-resume": (("--force", "--resume"), ("--force", "--resume")),
+    "curl-too-tight": (
+        ("--set", "tentacles.rest_curvature=80"),
+        ("tentacles.rest_curvature = 80", "tentacles.spacing", "at most 0.5"),
+    ),
+    "torsion-too-tight": (
+        ("--set", "tentacles.rest_torsion=-80"),
+        ("tentacles.rest_torsion = -80", "at most 0.5"),
+    ),
 }
 
 

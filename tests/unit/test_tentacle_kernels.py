@@ -214,7 +214,20 @@ def test_integrator_conserves_momentum_of_a_free_chain():
     momentum = model.mass @ v[0]
     zeros = np.zeros((steps, 1, 3))
     diagnostics = np.zeros((1, 3))
-    advance_frame(x, v, zeros, zeros, zeros + DOWN, zeros, model, medium, 1e-3, diagnostics)
+    advance_frame(
+        x,
+        v,
+        zeros,
+        zeros,
+        zeros + DOWN,
+        zeros,
+        np.zeros_like(x),
+        zeros,
+        model,
+        medium,
+        1e-3,
+        diagnostics,
+    )
     assert diagnostics[0, 2] == -1
     np.testing.assert_allclose(model.mass @ v[0], momentum, rtol=1e-9, atol=1e-15)
     assert np.linalg.norm(v[0] - v[0].mean(axis=0)) > 1e-3  # it did move and bend

@@ -28,7 +28,20 @@ def static_tip_deflection(bending, particles=60, spacing=0.01, modulus=5e9, load
     steps = 100
     zeros = np.zeros((steps, 1, 3))
     diagnostics = np.zeros((1, 3))
-    advance_frame(x, v, zeros, zeros, zeros + DOWN, zeros, model, medium, 20.0, diagnostics)
+    advance_frame(
+        x,
+        v,
+        zeros,
+        zeros,
+        zeros + DOWN,
+        zeros,
+        np.zeros_like(x),
+        zeros,
+        model,
+        medium,
+        20.0,
+        diagnostics,
+    )
     assert diagnostics[0, 2] == -1
     assert np.abs(v).max() < 1e-9, "not settled"
     length = (particles - 1) * spacing
@@ -70,7 +83,20 @@ def test_pinned_root_carries_no_moment():
     v = np.zeros_like(x)
     zeros = np.zeros((1200, 1, 3))
     diagnostics = np.zeros((1, 3))
-    advance_frame(x, v, zeros, zeros, zeros + DOWN, zeros, model, medium, 0.05, diagnostics)
+    advance_frame(
+        x,
+        v,
+        zeros,
+        zeros,
+        zeros + DOWN,
+        zeros,
+        np.zeros_like(x),
+        zeros,
+        model,
+        medium,
+        0.05,
+        diagnostics,
+    )
     assert diagnostics[0, 2] == -1
     expected = np.arange(particles) * spacing
     np.testing.assert_allclose(x[0, :, 0], expected, atol=1e-6)

@@ -25,7 +25,20 @@ def fall(particles, spacing, rho_t, rho_w, mu, duration, dt):
     steps = round(duration / dt)
     zeros = np.zeros((steps, 1, 3))
     diagnostics = np.zeros((1, 3))
-    advance_frame(x, v, zeros, zeros, zeros + DOWN, zeros, model, medium, dt, diagnostics)
+    advance_frame(
+        x,
+        v,
+        zeros,
+        zeros,
+        zeros + DOWN,
+        zeros,
+        np.zeros_like(x),
+        zeros,
+        model,
+        medium,
+        dt,
+        diagnostics,
+    )
     assert diagnostics[0, 2] == -1
     return v[0]
 

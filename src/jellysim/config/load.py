@@ -18,7 +18,7 @@ from typing import Any
 
 import tomli_w
 
-from jellysim.config.schema import Scene
+from jellysim.config.schema import MAX_TURN_PER_SEGMENT, Scene
 from jellysim.errors import InputError
 
 Tree = dict[str, Any]
@@ -207,6 +207,7 @@ def _check_consistency(scene: Scene) -> None:
             f"tentacles.count * tentacles.particles = {t.count * t.particles} is too large: "
             "at most 5,000,000 simulated particles"
         )
+    _check_rest_shape(scene)
     if scene.bell.model != "none" and scene.root_motion.amplitude > 0.0:
         raise InputError(
             f"root_motion.amplitude = {_show(scene.root_motion.amplitude)} forces the roots, which "
@@ -240,6 +241,21 @@ def _check_consistency(scene: Scene) -> None:
             f"bell.swim_speed = {_show(bell.swim_speed)} needs a pulsing bell: the bell "
             "swims by contracting, and bell.contraction = 0 holds it still"
         )
+
+
+def _check_rest_shape(scene: Scene) -> None:
+    """A rest curl the discrete chain can draw: at most 0.5 rad of turning per segment, about
+    12.6 segments or more per turn of the coil (docs/theory/tentacle.md §6)."""
+    t = scene.tentacles
+    limit = MAX_TURN_PER_SEGMENT
+    for key in ("rest_curvature", "rest_curvature_tip", "rest_torsion"):
+        value = getattr(t, key)
+        if value is not None and abs(value) * t.spacing > limit:
+            raise InputError(
+                f"tentacles.{key} = {_show(value)} is too tight for tentacles.spacing = "
+                f"{_show(t.spacing)}: |{key}| x spacing must be at most {limit:g} "
+                f"(|{key}| <= {limit / t.spacing:.6g} 1/m), or refine the spacing"
+            )
 
 
 def _check_soft_bell(scene: Scene) -> None:

@@ -26,6 +26,11 @@ def param(default: Any, *, unit: str = "", doc: str, kind: str = "float", **spec
     return field(default=default, metadata=meta)
 
 
+# The largest turning per segment, kappa d and |tau| d, that a tentacle's rest shape may ask of
+# the chain (docs/theory/tentacle.md §6): 12.6 segments or more per turn of the coil.
+MAX_TURN_PER_SEGMENT = 0.5
+
+
 @dataclass(frozen=True)
 class Water:
     density: float = param(1000.0, unit="kg/m3", doc="density of the water", ge=1.0e-3, le=1.0e5)
@@ -102,6 +107,45 @@ class Tentacles:
     )
     interpolation: int = param(
         1, kind="int", ge=1, le=1000, doc="tentacles drawn per simulated tentacle (render time)"
+    )
+    rest_curvature: float | None = param(
+        None,
+        unit="1/m",
+        ge=0.0,
+        le=1.0e6,
+        nullable=True,
+        doc="natural curl: curvature of the tentacle at rest, at the root (unset: straight); "
+        "slack tentacles coil, the flow straightens them. rest_curvature x spacing at most 0.5",
+    )
+    rest_curvature_tip: float | None = param(
+        None,
+        unit="1/m",
+        ge=0.0,
+        le=1.0e6,
+        nullable=True,
+        doc="rest curvature at the tip, linear in arc length from the root's (unset: the same "
+        "as rest_curvature, a uniform curl); larger than at the root coils the tips tighter",
+    )
+    curl_angle: float | None = param(
+        None,
+        unit="deg",
+        ge=-360.0,
+        le=360.0,
+        nullable=True,
+        doc="direction the curl turns at the root, about the root direction from the outward "
+        "radial direction (unset: 0, curling outward, away from the bell axis; 180 curls "
+        "inward; 90 sideways, right-handed about the root direction), fixed in the bell frame",
+    )
+    rest_torsion: float | None = param(
+        None,
+        unit="1/m",
+        ge=-1.0e6,
+        le=1.0e6,
+        nullable=True,
+        doc="helical twist of the curl: its plane turns by this many radians per metre along "
+        "the chain (unset: 0, a planar curl; > 0 a right-handed helix of radius k/(k^2 + tau^2) "
+        "rising 2 pi tau/(k^2 + tau^2) per turn, k the rest curvature); |rest_torsion| x "
+        "spacing at most 0.5",
     )
 
 

@@ -22,8 +22,15 @@ from jellysim.io.result import frame_datasets
 from jellysim.simulation.loop import Simulation, register_loop
 from jellysim.tentacle import kernels
 from jellysim.tentacle.flow import flow_noise_for, water_velocity
-from jellysim.tentacle.kernels import advance_frame
-from jellysim.tentacle.model import chain_model_for, characteristic_speed, medium_for, plan_substeps
+from jellysim.tentacle.kernels import advance_frame, rest_shape_positions
+from jellysim.tentacle.model import (
+    chain_model_for,
+    characteristic_speed,
+    curl_normals,
+    medium_for,
+    plan_substeps,
+    rest_shape_for,
+)
 from jellysim.tentacle.roots import Forcing, RootDriver
 
 # Watchdog: a chain whose RMS speed exceeds this multiple of the scene's speed scale has run away.
@@ -38,6 +45,10 @@ class TentacleSimulation(Simulation):
     scene's bell model, whose body datasets then join the result. State (mutated in place, never
     rebound): ``positions``, ``velocities`` (T, P, 3) in m, m/s; ``diagnostics`` (T, 3) per
     chain: largest length error, most projection iterations, first failed substep (-1: none).
+    Scene data built once: ``rest_shape`` (T, P, 3) m, each chain's rest second differences in
+    its transported frames (zeros: straight; docs/theory/tentacle.md §6), and ``outward`` (T, 3)
+    the unit outward radial direction of each root at t = 0, the rest curl's reference in the
+    bell frame.
     """
 
     def __init__(self, scene: Scene, driver: RootDriver | None = None) -> None:
@@ -56,6 +67,9 @@ class TentacleSimulation(Simulation):
         self.positions = np.empty((t.count, t.particles, 3))
         self.velocities = np.empty((t.count, t.particles, 3))
         self.diagnostics = np.zeros((t.count, 3))
+        self.rest_shape = rest_shape_for(scene)
+        self.curled = bool(np.any(self.rest_shape != 0.0))
+        self.outward = self._outward() if self.curled else np.zeros((t.count, 3))
         self.reset()
         self.speed_limit = RUNAWAY_SPEED_FACTOR * self._speed_scale(forcing)
 
@@ -67,15 +81,56 @@ class TentacleSimulation(Simulation):
         contrast = abs(s.tentacle_density - s.water.density) / s.tentacle_density
         return characteristic_speed(s, forcing) + math.sqrt(g * length * contrast) + 0.1
 
+    def _outward(self) -> np.ndarray:
+        """Unit outward directions (T, 3) of the roots at t = 0, perpendicular to the bell
+        axis, from the margin's centre (zero rows for a root on the axis)."""
+        roots = self.driver.roots(np.zeros(1))[0][0]
+        axis = self.driver.axis(np.zeros(1))[0]
+        radial = roots - self.driver.margin(0.0).mean(axis=0)
+        radial -= (radial @ axis)[:, None] * axis
+        size = np.linalg.norm(radial, axis=1)
+        return np.where(size[:, None] > 0.0, radial / np.maximum(size, 1e-300)[:, None], 0.0)
+
+    def curl_normals(self, times: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Root-frame normals (S, T, 3) of the rest shapes at ``times`` given the clamp
+        directions (S, T, 3): the outward direction carried with the bell axis (the minimal
+        rotation from the axis at t = 0), made perpendicular to the clamp direction; zeros for
+        straight chains, which do not use them."""
+        if not self.curled:
+            return np.zeros_like(directions)
+        a = self.driver.axis(np.zeros(1))[0]
+        b = self.driver.axis(times)  # (S, 3)
+        cross = np.cross(a, b)[:, None, :]  # (S, 1, 3): the rotation a -> b about a x b
+        cos = (b @ a)[:, None, None]
+        u = self.outward[None, :, :]  # (1, T, 3)
+        along = np.sum(cross * u, axis=2)[..., None]
+        outward = cos * u + np.cross(cross, u) + along / (1.0 + cos) * cross
+        return np.ascontiguousarray(curl_normals(directions, outward, b))
+
     def reset(self) -> None:
-        """Frame 0: every tentacle straight from its root along its clamp direction, moving
-        rigidly with its root (no impulsive start)."""
-        roots, root_velocities, directions = self.driver.roots(np.zeros(1))
+        """Frame 0: every tentacle in its rest shape from its root (straight along its clamp
+        direction unless it has a rest curl), moving rigidly with its root (no impulsive
+        start)."""
+        times = np.zeros(1)
+        roots, root_velocities, directions = self.driver.roots(times)
         self._rim = (0, roots[0], root_velocities[0])  # (frame, rim, rim velocity)
-        offsets = np.arange(self.scene.tentacles.particles) * self.scene.tentacles.spacing
-        self.positions[:] = (
-            roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
-        )
+        t = self.scene.tentacles
+        if self.curled:
+            normals = self.curl_normals(times, directions)
+            for chain in range(t.count):
+                rest_shape_positions(
+                    roots[0, chain],
+                    directions[0, chain],
+                    normals[0, chain],
+                    self.rest_shape[chain],
+                    t.spacing,
+                    self.positions[chain],
+                )
+        else:
+            offsets = np.arange(t.particles) * t.spacing
+            self.positions[:] = (
+                roots[0][:, None, :] + offsets[None, :, None] * directions[0][:, None, :]
+            )
         self.velocities[:] = root_velocities[0][:, None, :]
         self.frame = 0
 
@@ -95,6 +150,8 @@ class TentacleSimulation(Simulation):
             roots,
             root_velocities,
             directions,
+            self.curl_normals(times, directions),
+            self.rest_shape,
             np.zeros_like(roots),
             self.model,
             self.medium,
@@ -114,13 +171,18 @@ class TentacleSimulation(Simulation):
             self.driver.bell_velocity(times),
             self.noise.sample(times),
         )
-        # Bending (Eq. 1-2), drag (Eq. 3-5) and inextensibility, every substep of every chain.
+        # The rest shape's root frame, fixed in the bell frame (docs/theory/tentacle.md §6).
+        normals = self.curl_normals(times, directions)
+        # Bending (Eq. 1-2) with the rest shape (Eq. T13), drag (Eq. 3-5) and inextensibility,
+        # every substep of every chain.
         advance_frame(
             self.positions,
             self.velocities,
             roots,
             root_velocities,
             directions,
+            normals,
+            self.rest_shape,
             flow,
             self.model,
             self.medium,

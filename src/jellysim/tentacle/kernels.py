@@ -8,9 +8,10 @@ prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T
 2. one backward-Euler step of bending (Eq. T2) and drag, constrained by the segment lengths
    linearised at the start of the step: the saddle-point (KKT) system
    ``[A  J^T; J  0] [x; lambda] = [M (x + dt v) + dt K_d x + dt^2 (f + K_d u); d]`` with
-   ``A = M + dt K_d + dt^2 c K``, interleaved per particle into a band of half-width 8 and
-   solved by a banded LDL^T factorisation in O(P) (Eq. T7); re-linearised at the new iterate
-   while a length is off by more than 1e-3,
+   ``A = M + dt K_d + dt^2 c K`` and f the buoyant weight plus, for a chain with a rest shape,
+   the rest shape's force at the start of the step (Eq. T13), interleaved per particle into a
+   band of half-width 8 and solved by a banded LDL^T factorisation in O(P) (Eq. T7);
+   re-linearised at the new iterate while a length is off by more than 1e-3,
 3. exact projection onto ``|x_{i+1} - x_i| = d`` by Newton iterations of the fast projection
    on a tridiagonal system, O(P) each; it only removes the linearisation's second-order error
    (Eq. T8),
@@ -137,6 +138,213 @@ def bending_forces(
             f = 0.5 * c * (e[k] - along * clamp_direction[k])
             out[1, k] -= f
             out[0, k] += f
+
+
+@njit(cache=True)
+def _transport(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> tuple[float, float, float]:
+    """Parallel transport of ``u`` from the unit tangent ``a`` to the unit tangent ``b``
+    (Eq. T11): the rotation about ``a x b`` that takes a to b, applied to u."""
+    c0 = a[1] * b[2] - a[2] * b[1]
+    c1 = a[2] * b[0] - a[0] * b[2]
+    c2 = a[0] * b[1] - a[1] * b[0]
+    cos = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    w = (c0 * u[0] + c1 * u[1] + c2 * u[2]) / (1.0 + cos)
+    return (
+        cos * u[0] + c1 * u[2] - c2 * u[1] + w * c0,
+        cos * u[1] + c2 * u[0] - c0 * u[2] + w * c1,
+        cos * u[2] + c0 * u[1] - c1 * u[0] + w * c2,
+    )
+
+
+@njit(cache=True)
+def _curl_frames(
+    x: np.ndarray,
+    clamp_direction: np.ndarray,
+    curl_normal: np.ndarray,
+    rest: np.ndarray,
+    work: np.ndarray,
+) -> None:
+    """The chain's parallel-transported frames and rest second differences (Eq. T11-T12).
+
+    Fills ``work`` (6, P, 3): row 0 the unit tangents t_j of the segments j = 0..P-2, row 1 the
+    transported normals n_j, row 2 at node i = 1..P-2 the rest second difference
+    ``g_i = F_{i-1} r_i`` (m), row 3 the second differences ``x_{i-1} - 2 x_i + x_{i+1}``, and
+    ``work[4, j, 0]`` the segment lengths.
+    """
+    n_particles = x.shape[0]
+    tangents = work[0]
+    normals = work[1]
+    for j in range(n_particles - 1):
+        length = 0.0
+        for k in range(3):
+            e = x[j + 1, k] - x[j, k]
+            tangents[j, k] = e
+            length += e * e
+        length = math.sqrt(length)
+        work[4, j, 0] = length
+        for k in range(3):
+            tangents[j, k] /= length
+    n0, n1, n2 = _transport(clamp_direction, tangents[0], curl_normal)
+    normals[0, 0], normals[0, 1], normals[0, 2] = n0, n1, n2
+    for j in range(1, n_particles - 1):
+        n0, n1, n2 = _transport(tangents[j - 1], tangents[j], normals[j - 1])
+        normals[j, 0], normals[j, 1], normals[j, 2] = n0, n1, n2
+    for i in range(1, n_particles - 1):
+        t = tangents[i - 1]
+        n = normals[i - 1]
+        b0 = t[1] * n[2] - t[2] * n[1]
+        b1 = t[2] * n[0] - t[0] * n[2]
+        b2 = t[0] * n[1] - t[1] * n[0]
+        r = rest[i]
+        work[2, i, 0] = r[0] * t[0] + r[1] * n[0] + r[2] * b0
+        work[2, i, 1] = r[0] * t[1] + r[1] * n[1] + r[2] * b1
+        work[2, i, 2] = r[0] * t[2] + r[1] * n[2] + r[2] * b2
+        for k in range(3):
+            work[3, i, k] = x[i - 1, k] - 2.0 * x[i, k] + x[i + 1, k]
+
+
+@njit(cache=True)
+def curl_energy(
+    x: np.ndarray,
+    c: float,
+    clamp_direction: np.ndarray,
+    curl_normal: np.ndarray,
+    rest: np.ndarray,
+    work: np.ndarray,
+) -> float:
+    """What a rest shape adds to the bending energy (J) of one chain ``x`` (P, 3), Eq. (T12).
+
+    ``sum_i (c/8) (|x_{i-1} - 2 x_i + x_{i+1} - g_i|^2 - |x_{i-1} - 2 x_i + x_{i+1}|^2)``: with
+    :func:`bending_energy` the energy ``(c/8) sum |Delta^2 x_i - g_i|^2`` of a chain whose rest
+    second differences are ``g_i = F_{i-1} r_i``, ``rest`` (P, 3) the components r_i (m) in the
+    frame F_{i-1} = (t, n, t x n) parallel-transported from the root frame (``clamp_direction``,
+    ``curl_normal``, unit and perpendicular) along the segments. ``work`` (6, P, 3) is scratch.
+    """
+    _curl_frames(x, clamp_direction, curl_normal, rest, work)
+    energy = 0.0
+    for i in range(1, x.shape[0] - 1):
+        for k in range(3):
+            g = work[2, i, k]
+            energy += 0.125 * c * g * g - 0.25 * c * work[3, i, k] * g
+    return energy
+
+
+@njit(cache=True)
+def curl_forces(
+    x: np.ndarray,
+    c: float,
+    clamp_direction: np.ndarray,
+    curl_normal: np.ndarray,
+    rest: np.ndarray,
+    work: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Force (N) of the rest shape on every particle of one chain, minus the gradient of
+    :func:`curl_energy`, into ``out`` (P, 3), Eq. (T13). O(P).
+
+    ``(c/4)`` times the gradient of ``W = sum_i Delta^2 x_i . g_i``: the direct part
+    ``g_{i-1} - 2 g_i + g_{i+1}`` and the part through the frames. A frame turned by an
+    infinitesimal rotation omega_j changes W by ``omega_j . tau_j``, ``tau_j = g_{j+1} x
+    Delta^2 x_{j+1}``; omega_j is ``t_j x delta t_j`` across the segment plus the twist
+    ``psi_j = -sum_{k<=j} q_k . (delta t_{k-1} + delta t_k)`` along it, with
+    ``q_k = t_{k-1} x t_k / (1 + t_{k-1} . t_k)`` (t_{-1} the fixed clamp direction). Gathered per
+    segment: ``a_j = tau_j x t_j - S_j q_j - S_{j+1} q_{j+1}``, S_k the sum of ``t_j . tau_j`` over
+    j >= k, and ``dW/de_j = (I - t_j t_j^T) a_j / |e_j|``. ``work`` (6, P, 3) is scratch.
+    """
+    n_particles = x.shape[0]
+    n_segments = n_particles - 1
+    _curl_frames(x, clamp_direction, curl_normal, rest, work)
+    tangents = work[0]
+    g = work[2]
+    torque = work[1]  # the normals are not needed any more: tau_j (row 1), q_j (row 3)
+    q = work[3]
+    quarter = 0.25 * c
+    out[:] = 0.0
+    for i in range(1, n_particles - 1):
+        for k in range(3):
+            out[i - 1, k] += quarter * g[i, k]
+            out[i, k] -= 2.0 * quarter * g[i, k]
+            out[i + 1, k] += quarter * g[i, k]
+    for j in range(n_segments):
+        if j + 1 < n_particles - 1:
+            s0 = work[3, j + 1, 0]
+            s1 = work[3, j + 1, 1]
+            s2 = work[3, j + 1, 2]
+            gg = g[j + 1]
+            torque[j, 0] = gg[1] * s2 - gg[2] * s1
+            torque[j, 1] = gg[2] * s0 - gg[0] * s2
+            torque[j, 2] = gg[0] * s1 - gg[1] * s0
+        else:
+            torque[j, 0] = 0.0
+            torque[j, 1] = 0.0
+            torque[j, 2] = 0.0
+    for j in range(n_segments):
+        a = clamp_direction if j == 0 else tangents[j - 1]
+        b = tangents[j]
+        c0 = a[1] * b[2] - a[2] * b[1]
+        c1 = a[2] * b[0] - a[0] * b[2]
+        c2 = a[0] * b[1] - a[1] * b[0]
+        denominator = 1.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+        q[j, 0] = c0 / denominator
+        q[j, 1] = c1 / denominator
+        q[j, 2] = c2 / denominator
+    suffix = 0.0  # S_{j+1}
+    for j in range(n_segments - 1, -1, -1):
+        t = tangents[j]
+        tau = torque[j]
+        later = suffix
+        suffix += t[0] * tau[0] + t[1] * tau[1] + t[2] * tau[2]
+        a0 = tau[1] * t[2] - tau[2] * t[1] - suffix * q[j, 0]
+        a1 = tau[2] * t[0] - tau[0] * t[2] - suffix * q[j, 1]
+        a2 = tau[0] * t[1] - tau[1] * t[0] - suffix * q[j, 2]
+        if j + 1 < n_segments:
+            a0 -= later * q[j + 1, 0]
+            a1 -= later * q[j + 1, 1]
+            a2 -= later * q[j + 1, 2]
+        along = a0 * t[0] + a1 * t[1] + a2 * t[2]
+        scale = quarter / work[4, j, 0]
+        f0 = scale * (a0 - along * t[0])
+        f1 = scale * (a1 - along * t[1])
+        f2 = scale * (a2 - along * t[2])
+        out[j + 1, 0] += f0
+        out[j + 1, 1] += f1
+        out[j + 1, 2] += f2
+        out[j, 0] -= f0
+        out[j, 1] -= f1
+        out[j, 2] -= f2
+
+
+@njit(cache=True)
+def rest_shape_positions(
+    root: np.ndarray,
+    clamp_direction: np.ndarray,
+    curl_normal: np.ndarray,
+    rest: np.ndarray,
+    spacing: float,
+    out: np.ndarray,
+) -> None:
+    """The chain in its rest shape, into ``out`` (P, 3) m: the zero of :func:`curl_energy` plus
+    :func:`bending_energy`, Eq. (T10, T12). The first segment leaves the root along the clamp
+    direction; then ``e_i = e_{i-1} + g_i`` with g_i in the frame transported along the chain as
+    :func:`curl_forces` transports it, so the shape is the discrete energy's exact minimum."""
+    for k in range(3):
+        out[0, k] = root[k]
+        out[1, k] = root[k] + spacing * clamp_direction[k]
+    tangent = clamp_direction.copy()
+    normal = curl_normal.copy()
+    edge = spacing * clamp_direction
+    for i in range(1, out.shape[0] - 1):
+        r = rest[i]
+        binormal = np.cross(tangent, normal)
+        for k in range(3):
+            edge[k] += r[0] * tangent[k] + r[1] * normal[k] + r[2] * binormal[k]
+        length = math.sqrt(edge[0] ** 2 + edge[1] ** 2 + edge[2] ** 2)
+        new_tangent = edge / length
+        n0, n1, n2 = _transport(tangent, new_tangent, normal)
+        normal[0], normal[1], normal[2] = n0, n1, n2
+        tangent = new_tangent
+        for k in range(3):
+            out[i + 1, k] = out[i, k] + edge[k]
 
 
 KKT_BLOCK = 4  # unknowns per particle in the saddle-point system: x, y, z and one multiplier
@@ -282,6 +490,8 @@ def advance_frame(
     root_positions: np.ndarray,
     root_velocities: np.ndarray,
     root_directions: np.ndarray,
+    curl_normals: np.ndarray,
+    rest_second_differences: np.ndarray,
     flow: np.ndarray,
     model: ChainModel,
     medium: Medium,
@@ -292,8 +502,13 @@ def advance_frame(
 
     ``positions``, ``velocities``: (T, P, 3) state, m and m/s. Per substep s = 0..S-1, at the end
     time of the substep: ``root_positions``, ``root_velocities`` (S, T, 3) the prescribed roots,
-    ``root_directions`` (S, T, 3) unit clamp directions t, ``flow`` (S, T, 3) the water velocity
-    (m/s) at the chain. ``diagnostics`` (T, 3) receives per chain: the largest relative
+    ``root_directions`` (S, T, 3) unit clamp directions t, ``curl_normals`` (S, T, 3) unit normals
+    n perpendicular to t (the root frame of the rest shape), ``flow`` (S, T, 3) the water velocity
+    (m/s) at the chain. ``rest_second_differences`` (T, P, 3) m: each chain's rest shape, the
+    components r_i of its rest second differences in the transported frames (Eq. T12); a chain
+    whose entries are all zero is straight at rest and skips the rest-shape force entirely. The
+    rest-shape force (Eq. T13) is explicit, evaluated at the start of each substep.
+    ``diagnostics`` (T, 3) receives per chain: the largest relative
     segment-length error after any substep, the most projection iterations, and the first
     substep whose state was not finite or whose projection failed (-1 if none).
     """
@@ -316,6 +531,13 @@ def advance_frame(
         old = np.empty((n_particles, 3))
         edges = np.empty((n_segments, 3))
         work = np.empty((4, n_segments))
+        curled = False
+        for i in range(n_particles):
+            for k in range(3):
+                if rest_second_differences[t, i, k] != 0.0:
+                    curled = True
+        rest_force = np.zeros((n_particles, 3))
+        curl_work = np.empty((6, n_particles, 3)) if curled else np.empty((6, 0, 3))
         worst_error = 0.0
         most_iterations = 0
         failed_at = -1
@@ -324,6 +546,17 @@ def advance_frame(
             r = root_positions[s, t]
             tdir = root_directions[s, t]
             old[:] = x
+            if curled:
+                # The rest shape's force at the start of the step, Eq. (T13).
+                curl_forces(
+                    old,
+                    c,
+                    tdir,
+                    curl_normals[s, t],
+                    rest_second_differences[t],
+                    curl_work,
+                    rest_force,
+                )
             # Sequential linearisation: re-solve with the segment directions of the new iterate
             # while a segment rotates so far in one step that its length is off by > 1e-3.
             for _linearisation in range(MAX_LINEARISATIONS):
@@ -355,6 +588,8 @@ def advance_frame(
                             + dt * k_drag * old[i, k]
                             + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
                         )
+                        if curled:
+                            rhs[row + k] += dt * dt * rest_force[i, k]
                     # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its direction.
                     lam = row + 3
                     if i == 0:  # a free root has no segment before it: a decoupled dummy
