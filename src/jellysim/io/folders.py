@@ -23,6 +23,26 @@ def output_folder(folder: Path, option: str = "--out") -> Path:
     return folder
 
 
+def check_writable(folder: Path, option: str = "--out") -> None:
+    """Refuse, creating nothing, an output whose nearest existing folder cannot be written to
+    (a read-only file system, no permission) or is a file."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{option} {folder}: '{existing}' exists and is not a folder")
+    if not os.access(existing, os.W_OK):
+        reason = "a read-only file system" if _read_only(existing) else "no permission"
+        raise InputError(f"{option} {folder}: the folder is not writable ({reason})")
+
+
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
 @contextmanager
 def writing_lock(folder: Path) -> Iterator[None]:
     """Hold ``folder``'s writer lock while the block runs: one jellysim run writes a folder at a

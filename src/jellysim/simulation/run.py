@@ -24,7 +24,7 @@ from jellysim.io.checkpoint import (
     save_checkpoint,
     scene_mismatch,
 )
-from jellysim.io.folders import output_folder, writing_lock
+from jellysim.io.folders import check_writable, output_folder, writing_lock
 from jellysim.io.result import RESULT_FILE, Result, read_frames
 from jellysim.progress import progress
 from jellysim.simulation.estimate import check_costs
@@ -91,6 +91,7 @@ def run(
     if resume and not result_path.exists():
         raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
 
+    check_writable(folder)
     replaced = result_path.stat().st_size if result_path.is_file() else 0  # or continued
     check_costs(scene, folder, reclaimed=replaced, quiet=quiet, enforce=estimate_check)
     # From here a stop signal ends the run at the next frame boundary (setting up included).
