@@ -99,7 +99,12 @@ def _parser() -> argparse.ArgumentParser:
         help="fluid particles as spheres, one blobby surface, or not at all (auto: spheres for "
         "fluid-only results, none when a jellyfish swims in the fluid)",
     )
-    render.add_argument("--seed", type=int, default=0, help="seed of the school's layout")
+    render.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the school's layout and of the water's particles and light shafts",
+    )
     render.add_argument("--frames", metavar="A:B", help="render frames A to B-1 only")
     render.add_argument("--gif", action="store_true", help="also write movie.gif")
     render.add_argument("--no-video", action="store_true", help="frames only")

@@ -426,6 +426,44 @@ class Look:
     tentacle_taper: float = param(
         0.3, gt=0.0, le=1.0, doc="drawn radius at the tip as a fraction of the root's"
     )
+    tentacle_transparency: float = param(
+        0.3,
+        ge=0.0,
+        le=0.95,
+        doc="how much of the water shows through a tentacle seen face-on (0 opaque)",
+    )
+    rim: float = param(
+        0.6,
+        ge=0.0,
+        le=1.0,
+        doc="Fresnel-like rim: face-on the bell's transparency moves this far towards clear, "
+        "at the silhouette this far towards opaque and lighter (0: the same at every angle)",
+    )
+    stripes: int | None = param(
+        None,
+        kind="int",
+        ge=0,
+        le=1000,
+        nullable=True,
+        doc="radial stripes seen through the bell, in a mix of the bell's and the tentacles' "
+        "colours (default: bell.lobes / 2, one on every other lobe; 0: none)",
+    )
+    marine_snow: int = param(
+        400,
+        kind="int",
+        ge=0,
+        le=100000,
+        doc="drifting particles (marine snow) in the water around the camera, 0 for none",
+    )
+    light_shafts: float = param(
+        0.5, ge=0.0, le=1.0, doc="brightness of the light shafts from above at final quality"
+    )
+    depth_of_field: float = param(
+        1.0,
+        ge=0.0,
+        le=10.0,
+        doc="focal blur at final quality, focused on the jellyfish (0: everything sharp)",
+    )
 
 
 @dataclass(frozen=True)

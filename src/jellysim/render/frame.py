@@ -43,6 +43,12 @@ class Look:
     water_color: RGB = (0.05, 0.20, 0.35)
     tentacle_radius: float = 0.004  # m at the root
     tentacle_taper: float = 0.3  # tip radius / root radius
+    tentacle_transparency: float = 0.3  # deep water mixed into a tentacle face-on (faked)
+    rim: float = 0.6  # Fresnel-like rim: 0 the same at every angle, 1 opaque at the silhouette
+    stripes: int = 0  # radial stripes seen through the bell, 0 none
+    marine_snow: int = 400  # drifting particles in the water around the camera
+    light_shafts: float = 0.5  # brightness of the light shafts from above at final quality
+    depth_of_field: float = 1.0  # focal blur at final quality, 0 everything sharp
 
 
 @dataclass(frozen=True)

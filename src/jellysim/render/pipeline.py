@@ -147,6 +147,7 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
         scene = load_scene(scene, list(overrides))
     look = scene.look
     radius = look.tentacle_radius or 0.25 * scene.tentacles.spacing
+    stripes = scene.bell.lobes // 2 if look.stripes is None else look.stripes
     return Look(
         bell_color=look.bell_color,
         tentacle_color=look.tentacle_color,
@@ -155,6 +156,12 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
         water_color=look.water_color,
         tentacle_radius=radius,
         tentacle_taper=look.tentacle_taper,
+        tentacle_transparency=look.tentacle_transparency,
+        rim=look.rim,
+        stripes=stripes,
+        marine_snow=look.marine_snow,
+        light_shafts=look.light_shafts,
+        depth_of_field=look.depth_of_field,
     )
 
 
@@ -477,7 +484,7 @@ def render(
             assert povray_path is not None
             scene_file = pov_dir / f"frame_{index:05d}.pov"
             text = povray.scene_text(
-                frame_at(index), cameras[index], size, level, extent, room_box, fluid
+                frame_at(index), cameras[index], size, level, extent, room_box, fluid, seed=seed
             )
             scene_file.write_text(text, encoding="utf-8")
             povray.render_file(povray_path, scene_file, image, size, level, max(1, cores // jobs))

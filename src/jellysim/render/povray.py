@@ -3,15 +3,19 @@
 World coordinates are right-handed with z up (DESIGN §3); POV-Ray's are left-handed with y up.
 Swapping y and z maps one onto the other without mirroring the picture (:func:`vec`).
 
-Looks (docs/rendering.md): the bell is a smooth ``mesh2`` with vertex normals, translucent,
-glowing at final quality; every tentacle is a tapered tube made of short cones with a sphere at
-each joint, all of a jellyfish's tentacles in one ``union`` (far faster to parse and trace than one
-``sphere_sweep`` per tentacle); three lights after the paper's Fig. 12 (key, fill and back), fog in
-the water's colour for the depth fade, and optionally the paper's room with a water tank.
+Looks (docs/rendering.md): the bell is a smooth ``mesh2`` with vertex normals, translucent
+mesoglea with a Fresnel-like rim (the ``aoi`` pattern) and radial stripes, at final quality
+glowing, refracting and holding a scattering medium; every tentacle is a tapered tube made of
+short cones with a sphere at each joint, all of a jellyfish's tentacles in one ``union`` (far
+faster to parse and trace than one ``sphere_sweep`` per tentacle); three lights after the
+paper's Fig. 12 (key, fill and back); the water a ground fog for the depth fade, with drifting
+marine snow and, at final quality, light shafts from above and depth of field; optionally the
+paper's room with a water tank.
 """
 
 from __future__ import annotations
 
+import math
 import shutil
 import subprocess
 from collections.abc import Iterable
@@ -39,18 +43,20 @@ INCLUDE_DIRS = (
 
 @dataclass(frozen=True)
 class Quality:
-    """A named quality level: antialiasing, shadows, glow and ray depth."""
+    """A named quality level: antialiasing, shadows, the volumetric and lens effects, ray depth."""
 
     name: str
-    antialias: float | None  # POV-Ray's +A threshold; None: off
+    antialias: float | None  # POV-Ray's +A threshold; None: off (focal blur samples instead)
     all_shadows: bool  # fill and back lights cast shadows too
-    glow: bool  # the bell's emission and refraction
+    glow: bool  # the bell's emission, refraction and glowing media inside it
     trace_level: int
+    light_shafts: bool  # shafts of light from above in the water
+    focal_blur: bool  # depth of field focused on the jellyfish; its samples antialias too
 
 
 QUALITIES = {
-    "draft": Quality("draft", None, False, False, 5),
-    "final": Quality("final", 0.3, True, True, 8),
+    "draft": Quality("draft", None, False, False, 5, False, False),
+    "final": Quality("final", None, True, True, 8, True, True),
 }
 
 
@@ -65,15 +71,34 @@ def _rgb(color: Iterable[float]) -> str:
     return f"<{r:.4g},{g:.4g},{b:.4g}>"
 
 
-def camera_block(camera: Camera, size: tuple[int, int]) -> str:
+APERTURE = 0.02  # focal blur: the aperture per metre of camera distance at depth_of_field 1
+SNOW_STREAM = 0x5A0  # random streams of the water's particles and shafts, apart from --seed's
+SHAFT_STREAM = 0x5AF
+SHAFTS = 6  # light shafts in the tile around the camera's target
+
+
+def camera_block(camera: Camera, size: tuple[int, int], focal_blur: float | None = None) -> str:
+    """The camera; with ``focal_blur`` (not None), depth of field focused on ``look_at``: an
+    aperture of ``focal_blur * APERTURE`` per metre of distance (a few pixels of blur at 1.5x the
+    distance), 4 to 16 jittered samples a pixel, which also antialias (at ``focal_blur`` 0 the
+    aperture is a pinhole's and only the antialiasing is left)."""
     width, height = size
+    blur = ""
+    if focal_blur is not None:
+        distance = float(np.linalg.norm(camera.look_at - camera.location))
+        aperture = max(focal_blur * APERTURE, 1e-4) * distance
+        blur = (
+            f"  aperture {aperture:.4g}\n"
+            "  blur_samples 4, 16\n  confidence 0.9\n  variance 1/256\n"
+            f"  focal_point {vec(camera.look_at)}\n"
+        )
     return (
         "camera {\n  perspective\n"
         f"  location {vec(camera.location)}\n"
         "  sky <0,1,0>\n"
         f"  right x*{width / height:.6g}\n"
         f"  angle {camera.angle:.6g}\n"
-        f"  look_at {vec(camera.look_at)}\n}}\n"
+        f"  look_at {vec(camera.look_at)}\n{blur}}}\n"
     )
 
 
@@ -93,28 +118,189 @@ def lights_block(camera: Camera, extent: float, quality: Quality) -> str:
     )
 
 
-def water_block(water: Iterable[float], fade_distance: float) -> str:
-    """Background and fog in the water's colour: far things fade into the water."""
-    color = _rgb(water)
-    deep = _rgb(0.25 * np.asarray(tuple(water)))
+def water_block(water: Iterable[float], fade_distance: float, camera: Camera) -> str:
+    """The water: a fog in its deep colour, everywhere at and below the camera and thinning
+    above it (POV-Ray's ground fog, in height above the camera's target), so things fade into
+    the water with distance and the water brightens towards the surface, up to three times
+    the water's colour straight up."""
+    water_rgb = np.asarray(tuple(water), dtype=np.float64)
+    deep = _rgb(0.25 * water_rgb)
+    bright = _rgb(np.minimum(3.0 * water_rgb, 1.0))
     return (
         "sky_sphere { pigment { gradient y color_map { "
-        f"[0.0 rgb {deep}] [0.5 rgb {deep}] [0.75 rgb {color}] [1.0 rgb {color}] }} "
+        f"[0.0 rgb {deep}] [0.5 rgb {deep}] [0.6 rgb {_rgb(water_rgb)}] [1.0 rgb {bright}] }} "
         "scale 2 translate -1 } }\n"
-        f"fog {{ fog_type 1 distance {fade_distance:.6g} color rgb {deep} }}\n"
+        f"fog {{ fog_type 2 distance {fade_distance:.6g} color rgb {deep} "
+        f"fog_offset {camera.look_at[2]:.6g} fog_alt {0.08 * fade_distance:.6g} up y }}\n"
+    )
+
+
+def _wrap(points: np.ndarray, low: np.ndarray, period: float) -> np.ndarray:
+    """Points of a world-fixed periodic tiling (period m) moved into the cube at ``low``: a point
+    keeps its world place while the cube moves with the camera, until it leaves the cube and
+    comes back in on the far side."""
+    return low + np.mod(points - low, period)
+
+
+def marine_snow_block(
+    camera: Camera,
+    size: tuple[int, int],
+    look: Look,
+    water: Iterable[float],
+    seed: int,
+    time: float,
+) -> str:
+    """``look.marine_snow`` small, dim, self-lit particles drifting slowly in the water (m/s in
+    proportion to the camera distance, so they read on screen at any scale), in a world-fixed
+    tiling around the camera's view: every frame has the same particles, each where its drift
+    has taken it, so they neither flicker nor jump between frames."""
+    if look.marine_snow <= 0:
+        return ""
+    _, _, forward = camera.basis()
+    distance = float(np.linalg.norm(camera.look_at - camera.location))
+    period = 2.2 * distance
+    low = camera.look_at + 0.3 * distance * forward - 0.5 * period
+    rng = np.random.default_rng([seed, SNOW_STREAM])
+    count = look.marine_snow
+    base = rng.uniform(0.0, period, size=(count, 3))
+    drift = distance * (rng.normal(0.0, 0.006, size=(count, 3)) - np.array([0.0, 0.0, 0.008]))
+    pixel = 2.0 * math.tan(math.radians(camera.angle) / 2.0) * distance / size[0]
+    radii = pixel * rng.uniform(0.35, 0.9, size=count)
+    brightness = rng.uniform(0.15, 0.4, size=count)
+    points = _wrap(base + time * drift, low, period)
+    water_rgb = np.asarray(tuple(water), dtype=np.float64)
+    parts = ["union {"]
+    for point, radius, bright in zip(points, radii, brightness, strict=True):
+        color = water_rgb + bright * (1.0 - water_rgb)
+        parts.append(f"sphere{{{vec(point)},{radius:.4g} pigment{{rgb {_rgb(color)}}}}}")
+    parts.append("finish { ambient 0 diffuse 0 emission 1 } no_shadow\n}")
+    return "\n".join(parts) + "\n"
+
+
+def light_shafts_block(camera: Camera, look: Look, water: Iterable[float], seed: int) -> str:
+    """Shafts of light from above, faked cheaply: open cylinders, vertical but for a lean
+    towards the key light, whose surface is clear at the silhouette and glows face-on (the
+    ``aoi`` pattern), so each reads as a soft-edged beam; bright above, fading out downwards.
+    World-fixed in x and y (a tiling around the camera's target, like the snow)."""
+    if look.light_shafts <= 0.0:
+        return ""
+    right, up, forward = camera.basis()
+    distance = float(np.linalg.norm(camera.look_at - camera.location))
+    period = 2.0 * distance
+    centre = camera.look_at + 1.1 * distance * forward
+    rng = np.random.default_rng([seed, SHAFT_STREAM])
+    base = rng.uniform(0.0, period, size=(SHAFTS, 2))
+    radii = distance * rng.uniform(0.05, 0.14, size=SHAFTS)
+    strengths = rng.uniform(0.5, 1.0, size=SHAFTS)
+    xy = _wrap(base, centre[:2] - 0.5 * period, period)
+    span = 1.4 * distance
+    bottom_z, top_z = camera.look_at[2] - span, camera.look_at[2] + span
+    lean = -0.6 * forward - 0.4 * right  # towards the key light, horizontally
+    lean[2] = 0.0
+    lean *= 0.25 / max(float(np.linalg.norm(lean)), 1e-9)
+    water_rgb = np.asarray(tuple(water), dtype=np.float64)
+    light = 0.5 + 0.5 * water_rgb / max(float(water_rgb.max()), 1e-9)
+    parts = []
+    for (x, y), radius, strength in zip(xy, radii, strengths, strict=True):
+        if np.dot(np.array([x, y]) - camera.location[:2], forward[:2]) < 1.2 * distance:
+            continue  # in front of the jellyfish, or behind the camera
+        bottom = np.array([x, y, bottom_z])
+        top = bottom + (top_z - bottom_z) * (np.array([0.0, 0.0, 1.0]) + lean)
+        glow = 0.3 * look.light_shafts * strength
+        fade = (
+            f"gradient y color_map {{ [0 rgbt <{_rgb(light)[1:-1]},1>] "
+            f"[0.4 rgbt <{_rgb(light)[1:-1]},1>] "
+            f"[1 rgbt <{_rgb(light)[1:-1]},{1.0 - glow:.4g}>] }} "
+            f"scale {1.01 * (top[2] - bottom_z):.4g} translate y*{bottom_z:.6g}"
+        )
+        parts.append(
+            f"cylinder {{ {vec(bottom)}, {vec(top)}, {radius:.4g} open\n"
+            "  texture { pigment { aoi pigment_map { [0.5 rgbt 1] [0.6 rgbt 1] "
+            f"[1 {fade}] }} }} finish {{ ambient 0 diffuse 0 emission 1 }} }}\n"
+            "  no_shadow\n}"
+        )
+    return "\n".join(parts) + "\n" if parts else ""
+
+
+FRESNEL_SAMPLES = (0.0, 0.3, 0.55, 0.75, 0.9, 1.0)  # of the way from face-on to the silhouette
+
+
+def bell_transmit(look: Look, theta: float) -> tuple[float, float]:
+    """The bell's transmit and how far its colour is lightened towards white, seen at ``theta``
+    (rad) from its normal: a Fresnel-like falloff ``w = (1 - cos theta)^1.5`` from face-on,
+    where the transparency ``t`` moves ``look.rim`` of the way towards clear, to the silhouette,
+    where it moves ``look.rim`` of the way towards opaque and the colour ``look.rim`` of the way
+    towards white: ``transmit = face - (face - edge) w``, ``lighten = rim w``."""
+    t, rim = look.bell_transparency, look.rim
+    face, edge = t + (1.0 - t) * rim, t * (1.0 - rim)
+    weight = (1.0 - math.cos(theta)) ** 1.5
+    return face - (face - edge) * weight, rim * weight
+
+
+def is_closed(faces: np.ndarray) -> bool:
+    """Whether a triangle mesh (faces (M, 3) int) is closed: every edge in exactly two faces."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))
+
+
+def _bell_pigment(jelly: Jellyfish, transmit: float, centre: np.ndarray, lighten: float) -> str:
+    """The bell's colour at one ``transmit``, lightened ``lighten`` of the way to white: plain, or
+    with ``look.stripes`` radial stripes about the bell's axis through ``centre`` (a lobe's tip
+    at angle 0 has one)."""
+    look = jelly.look
+    bell = np.asarray(look.bell_color, dtype=np.float64)
+    bell = bell + lighten * (1.0 - bell)
+    plain = f"rgbt <{_rgb(bell)[1:-1]},{transmit:.3g}>"
+    if look.stripes <= 0:
+        return plain
+    stripe = 0.35 * bell + 0.65 * np.asarray(look.tentacle_color, dtype=np.float64)
+    dark = f"rgbt <{_rgb(stripe)[1:-1]},{0.6 * transmit:.3g}>"
+    return (
+        f"radial frequency {look.stripes} color_map {{ [0 {dark}] [0.1 {dark}] [0.3 {plain}] "
+        f"[0.7 {plain}] [0.9 {dark}] [1 {dark}] }} translate {vec(centre)}"
     )
 
 
 def bell_block(jelly: Jellyfish, quality: Quality) -> str:
-    """The bell as a smooth mesh2 (vertex normals), translucent; glowing at final quality."""
+    """The bell as a smooth mesh2 (vertex normals) of translucent mesoglea: clear face-on and
+    opaque at the silhouette (``look.rim``, a Fresnel-like falloff over the ``aoi`` pattern),
+    radial stripes seen through it; at final quality glowing, refracting and, when the surface
+    is closed, filled with a glowing, scattering, absorbing medium, so thick parts (the
+    silhouette) glow the most and the lights soften in it."""
     if jelly.bell_vertices is None or jelly.bell_faces is None:
         return ""
     vertices, faces = jelly.bell_vertices, jelly.bell_faces
     normals = vertex_normals(vertices, faces)
     look = jelly.look
-    finish = "finish { ambient 0.15 diffuse 0.6 specular 0.4 roughness 0.02"
+    centre = vertices.mean(axis=0)
+    size = float(np.ptp(vertices, axis=0).max())
+    entries = []
+    for fraction in FRESNEL_SAMPLES:
+        transmit, lighten = bell_transmit(look, 0.5 * math.pi * fraction)
+        pigment = _bell_pigment(jelly, transmit, centre, lighten)
+        # aoi: 1 face-on, 0.5 at the silhouette, 0 face-on again from behind.
+        for value in sorted({0.5 * fraction, 1.0 - 0.5 * fraction}):
+            entries.append((value, pigment))
+    entries.sort(key=lambda entry: entry[0])
+    pigment_map = " ".join(f"[{value:.4g} {pigment}]" for value, pigment in entries)
+    finish = "finish { ambient 0.1 diffuse 0.3 specular 0.3 roughness 0.005"
     finish += f" emission {0.6 * look.glow:.3g} }}" if quality.glow else " }"
-    interior = " interior { ior 1.02 }" if quality.glow else ""
+    interior, inside = "", ""
+    if quality.glow:
+        interior = " interior { ior 1.02 }"
+    if quality.glow and is_closed(faces):  # media need a closed surface with an inside
+        inside = "  inside_vector <0,1,0>"
+        bell = np.asarray(look.bell_color, dtype=np.float64)
+        # Per metre, in proportion to the bell's size: the same look at any scale.
+        emission = 1.5 * look.glow * bell / size
+        scattering = 2.0 * bell / size
+        absorption = 0.8 * (1.0 - bell) / size
+        interior = (
+            " interior { ior 1.02 media { method 3 intervals 1 samples 3 "
+            f"emission {_rgb(emission)} scattering {{ 1, {_rgb(scattering)} extinction 0.5 }} "
+            f"absorption {_rgb(absorption)} }} }}"
+        )
     lines = [
         "mesh2 {",
         f"  vertex_vectors {{ {len(vertices)},",
@@ -127,16 +313,19 @@ def bell_block(jelly: Jellyfish, quality: Quality) -> str:
         # The y-z swap reverses the winding; POV-Ray does not cull, so keep the indices.
         ",".join(f"<{a},{b},{c}>" for a, b, c in faces),
         "  }",
-        "  texture { pigment { rgbt <"
-        f"{look.bell_color[0]:.4g},{look.bell_color[1]:.4g},{look.bell_color[2]:.4g},"
-        f"{look.bell_transparency:.3g}> }} {finish} }}{interior}",
+        inside,
+        f"  texture {{ pigment {{ aoi pigment_map {{ {pigment_map} }} }} {finish} }}{interior}",
         "}",
     ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(line for line in lines if line) + "\n"
 
 
-def tentacles_block(jelly: Jellyfish) -> str:
-    """Every tentacle as a tapered tube: cones between particles, spheres at the joints."""
+def tentacles_block(jelly: Jellyfish, water: Iterable[float]) -> str:
+    """Every tentacle as a tapered tube: cones between particles, spheres at the joints. Slightly
+    translucent, faked: the tubes are opaque, their colour mixed ``look.tentacle_transparency``
+    of the way towards the deep water's face-on and pure at their edges (the ``aoi`` pattern),
+    as a clear tube in dark water looks. Traced transparency costs six times as much at 300
+    tentacles (docs/performance.md) and cannot be seen at 2 to 3 pixels a tentacle."""
     tentacles = jelly.tentacles
     if tentacles.size == 0:
         return ""
@@ -148,10 +337,15 @@ def tentacles_block(jelly: Jellyfish) -> str:
             parts.append(f"cone{{{points[i]},{radii[i]:.4g},{points[i + 1]},{radii[i + 1]:.4g}}}")
             if i > 0:
                 parts.append(f"sphere{{{points[i]},{radii[i]:.4g}}}")
-    color = _rgb(jelly.look.tentacle_color)
+    color = np.asarray(jelly.look.tentacle_color, dtype=np.float64)
+    see_through = jelly.look.tentacle_transparency
+    deep = 0.25 * np.asarray(tuple(water), dtype=np.float64)
+    clear = f"rgb {_rgb((1.0 - see_through) * color + see_through * deep)}"
+    edge = f"rgb {_rgb(color)}"
     parts.append(
-        f"texture {{ pigment {{ rgb {color} }} "
-        "finish { ambient 0.15 diffuse 0.7 specular 0.2 } }"
+        f"texture {{ pigment {{ aoi color_map {{ [0 {clear}] [0.3 {clear}] [0.5 {edge}] "
+        f"[0.7 {clear}] [1 {clear}] }} }} "
+        "finish { ambient 0.15 diffuse 0.7 specular 0.3 roughness 0.02 } }"
     )
     parts.append("}")
     return "\n".join(parts) + "\n"
@@ -210,26 +404,36 @@ def scene_text(
     room: tuple[np.ndarray, np.ndarray] | None = None,
     fluid_style: str = "spheres",
     water: Iterable[float] | None = None,
+    seed: int = 0,
 ) -> str:
     """The whole POV-Ray scene of one frame. ``extent`` (m) is the size of what is framed;
-    ``water`` the water's colour (default: the first jellyfish's look)."""
+    ``water`` the water's colour (default: the first jellyfish's look); ``seed`` places the
+    water's particles and light shafts. The same arguments give the same text."""
+    look = frame.jellyfish[0].look if frame.jellyfish else Look()
     if water is None:
-        water = frame.jellyfish[0].look.water_color if frame.jellyfish else Look().water_color
+        water = look.water_color
+    focal_blur = look.depth_of_field if quality.focal_blur else None
     parts = [
         "#version 3.7;\n",
         f"global_settings {{ assumed_gamma 1.0 max_trace_level {quality.trace_level} }}\n",
         f"// jellysim frame at t = {frame.time:.6g} s\n",
-        camera_block(camera, size),
+        camera_block(camera, size, focal_blur),
         lights_block(camera, extent, quality),
     ]
-    if room is None:
-        parts.append(water_block(water, 6.0 * extent))
-    else:
+    if room is not None:
         parts.append("background { rgb <0.9,0.9,0.88> }\n")
         parts.append(room_block(room[0], room[1], water))
+    else:
+        parts.append(water_block(water, 6.0 * extent, camera))
+        # The water's particles and light shafts, not among simulated fluid particles, which
+        # they would be mistaken for.
+        if frame.fluid is None or frame.fluid.size == 0:
+            parts.append(marine_snow_block(camera, size, look, water, seed, frame.time))
+            if quality.light_shafts:
+                parts.append(light_shafts_block(camera, look, water, seed))
     for jelly in frame.jellyfish:
         parts.append(bell_block(jelly, quality))
-        parts.append(tentacles_block(jelly))
+        parts.append(tentacles_block(jelly, water))
     parts.append(fluid_block(frame, fluid_style))
     return "".join(parts)
 
