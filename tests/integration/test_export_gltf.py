@@ -25,6 +25,7 @@ from jellysim.export import export
 from jellysim.export import gltf as gltf_export
 from jellysim.interpolation import interpolate_result
 from jellysim.render.frame import tentacle_radii
+from jellysim.render.materials import GLOW_EMISSION
 from jellysim.render.pipeline import scene_look
 
 pygltflib = pytest.importorskip("pygltflib", reason="pygltflib is a test dependency (.[test])")
@@ -205,7 +206,10 @@ def test_materials_come_from_the_scene_look(brown: jellysim.Result, exported: li
     np.testing.assert_allclose(
         bell.pbrMetallicRoughness.baseColorFactor, [*look.bell_color, 1 - look.bell_transparency]
     )
-    np.testing.assert_allclose(bell.emissiveFactor, np.multiply(look.glow, look.bell_color))
+    np.testing.assert_allclose(
+        bell.emissiveFactor, np.multiply(GLOW_EMISSION * look.glow, look.bell_color)
+    )
+    assert bell.doubleSided
     tentacles = materials["tentacles"]
     np.testing.assert_allclose(
         tentacles.pbrMetallicRoughness.baseColorFactor, [*look.tentacle_color, 1.0]

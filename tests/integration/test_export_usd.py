@@ -15,10 +15,11 @@ import jellysim
 from jellysim import fields
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
+from jellysim.render.materials import bell_material, tentacle_material
 from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 
 pxr = pytest.importorskip("pxr", reason="usd-core is a test dependency (pip install -e .[test])")
-from pxr import Usd, UsdGeom, UsdValidation  # noqa: E402
+from pxr import Usd, UsdGeom, UsdShade, UsdValidation  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +37,32 @@ def test_stage_metadata(stage_and_result) -> None:
     assert stage.GetDefaultPrim().GetPath() == "/Jellyfish"
     assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, result.frames - 1)
     assert stage.GetTimeCodesPerSecond() == 10.0
+    assert stage.GetFramesPerSecond() == 10.0  # authored: importers do not fall back to 24
+    assert stage.GetRootLayer().HasFramesPerSecond()
+
+
+@pytest.mark.parametrize(
+    ("prim", "material"),
+    [("Bell", bell_material), ("Tentacles", tentacle_material)],
+)
+def test_prims_are_bound_to_preview_surfaces_of_the_look(stage_and_result, prim, material) -> None:
+    stage, result = stage_and_result
+    expected = material(scene_look(result.scene))
+    geometry = stage.GetPrimAtPath(f"/Jellyfish/{prim}")
+    bound, _ = UsdShade.MaterialBindingAPI(geometry).ComputeBoundMaterial()
+    assert bound.GetPath() == f"/Jellyfish/Looks/{prim}"
+    source = bound.ComputeSurfaceSource()[0]
+    assert source.GetIdAttr().Get() == "UsdPreviewSurface"
+    inputs = {i.GetBaseName(): i.Get() for i in source.GetInputs()}
+    np.testing.assert_allclose(inputs["diffuseColor"], expected.base_color, atol=1e-6)
+    np.testing.assert_allclose(inputs["emissiveColor"], expected.emissive, atol=1e-6)
+    assert inputs["opacity"] == pytest.approx(expected.opacity)
+    gprim = UsdGeom.Gprim(geometry)
+    np.testing.assert_allclose(gprim.GetDisplayColorAttr().Get()[0], expected.base_color, atol=1e-6)
+    assert gprim.GetDisplayOpacityAttr().Get()[0] == pytest.approx(expected.opacity)
+    if prim == "Bell":  # translucent and glowing, from bell_transparency and glow
+        assert 0.0 < inputs["opacity"] < 1.0
+        assert max(inputs["emissiveColor"]) > 0.0
 
 
 def test_bell_and_tentacles_match_the_result(stage_and_result) -> None:
@@ -246,7 +273,10 @@ def test_materials_lights_and_render_settings(blender_export) -> None:
     materials = script.material_parameters(settings)
     np.testing.assert_allclose(materials["Bell"]["base_color"], [*look.bell_color, 1.0])
     assert materials["Bell"]["alpha"] == pytest.approx(1.0 - look.bell_transparency)
-    assert materials["Bell"]["emission_strength"] == pytest.approx(look.glow)
+    emitted = np.multiply(
+        materials["Bell"]["emission_strength"], materials["Bell"]["emission_color"]
+    )
+    np.testing.assert_allclose(emitted[:3], bell_material(look).emissive)
     assert materials["Bell"]["blend"] and not materials["Tentacles"]["blend"]
     np.testing.assert_allclose(materials["Tentacles"]["base_color"], [*look.tentacle_color, 1.0])
     np.testing.assert_allclose(materials["World"]["color"], [*look.water_color, 1.0])

@@ -33,7 +33,7 @@ CAMERA_MARGIN = 1.1  # distance beyond the one that just fits the animation's bo
 EMBEDDED_SETTINGS: dict[str, Any] | None = None  # the exporter writes the stage's settings here
 
 VECTORS = ("bounds_min", "bounds_max", "view_direction")
-COLORS = ("bell_color", "tentacle_color", "water_color", "fluid_color")
+COLORS = ("bell_color", "bell_emissive", "tentacle_color", "water_color", "fluid_color")
 NUMBERS = ("fps", "bell_transparency", "glow", "tentacle_radius", "field_of_view")
 INTEGERS = ("first_frame", "last_frame", "frame_step")
 
@@ -158,7 +158,7 @@ def light_rig(low: list[float], high: list[float]) -> list[dict[str, Any]]:
 
 def material_parameters(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """Principled BSDF inputs per imported prim (Bell, Tentacles, Fluid) and the world colour,
-    from the scene's [look] as the other exports use it."""
+    from the shared materials of the scene's [look] as the other exports use them."""
     bell = settings["bell_color"]
     return {
         "Bell": {
@@ -166,8 +166,8 @@ def material_parameters(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
             "alpha": 1.0 - settings["bell_transparency"],
             "roughness": 0.3,
             "transmission": settings["bell_transparency"],
-            "emission_color": [*bell, 1.0],
-            "emission_strength": settings["glow"],
+            "emission_color": [*settings["bell_emissive"], 1.0],
+            "emission_strength": 1.0,
             "blend": True,
         },
         "Tentacles": {

@@ -27,9 +27,11 @@ Each frame's mesh has up to three primitives, as the result has them:
 - a fluid's live particles as POINTS (what viewers draw of them varies: a pixel in three.js,
   loose vertices in Blender).
 
-Materials (pbrMetallicRoughness, linear RGB as in ``[look]``, the same colours as the USD and
-POV-Ray output): the bell with base alpha ``1 - bell_transparency`` and emission ``glow`` times
-its colour; the tentacles opaque; the fluid ``FLUID_COLOR`` (as rendered).
+Materials (pbrMetallicRoughness, linear RGB) are the shared ones of
+:mod:`jellysim.render.materials`, as every renderer and export uses them: the bell double-sided
+with base alpha ``1 - bell_transparency`` (alphaMode BLEND) and emission ``GLOW_EMISSION glow``
+times its colour; the tentacles opaque; the fluid ``FLUID_COLOR``. The bell's rim and stripes
+are view-dependent shading glTF's core materials cannot express (docs/rendering.md).
 
 Long animations are split into parts so that no file nears GLB's 4 GiB (uint32) length limit or
 a viewer's memory: ``<name>_part000.glb``, ``<name>_part001.glb``, ... each hold a contiguous run
@@ -55,7 +57,12 @@ import numpy as np
 from jellysim import fields
 from jellysim.errors import JellysimError
 from jellysim.io.result import Result
-from jellysim.render.frame import FLUID_COLOR
+from jellysim.render.materials import (
+    Material,
+    bell_material,
+    fluid_material,
+    tentacle_material,
+)
 
 PART_BUDGET_BYTES = 256 * 2**20  # most bytes of one .glb part (more only for a single frame)
 TUBE_SIDES = 6  # vertices around a tentacle's tube at each particle
@@ -316,14 +323,14 @@ def generator() -> str:
     return f"jellysim {__version__} (jellysim export --format gltf)"
 
 
-def _material(name: str, color: tuple[float, float, float], **extra: Any) -> dict[str, Any]:
-    alpha = extra.pop("alpha", 1.0)
+def _material(material: Material, **extra: Any) -> dict[str, Any]:
+    """A glTF pbrMetallicRoughness material from a shared one (linear RGB, as glTF wants)."""
     return {
-        "name": name,
+        "name": material.name,
         "pbrMetallicRoughness": {
-            "baseColorFactor": [*map(float, color), float(alpha)],
+            "baseColorFactor": [*map(float, material.base_color), float(material.opacity)],
             "metallicFactor": 0.0,
-            "roughnessFactor": extra.pop("roughness", 0.6),
+            "roughnessFactor": float(material.roughness),
         },
         **extra,
     }
@@ -356,14 +363,13 @@ def _build_part(
     if source.bell_faces is not None:
         indices = _indices(source.bell_faces)
         view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
+        bell = bell_material(look)
         materials.append(
             _material(
-                "bell",
-                look.bell_color,
-                alpha=1.0 - look.bell_transparency,
-                roughness=0.3,
-                emissiveFactor=[float(look.glow * c) for c in look.bell_color],
+                bell,
+                emissiveFactor=[float(c) for c in bell.emissive],
                 alphaMode="BLEND",
+                doubleSided=True,
             )
         )
         shared["bell"] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
@@ -371,10 +377,10 @@ def _build_part(
         count, particles = source.tentacles.shape[1:3]
         indices = _indices(tube_faces(count, particles))
         view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
-        materials.append(_material("tentacles", look.tentacle_color))
+        materials.append(_material(tentacle_material(look)))
         shared["tentacles"] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
     if source.fluid_position is not None:
-        materials.append(_material("fluid", FLUID_COLOR, roughness=0.2))
+        materials.append(_material(fluid_material()))
         shared["fluid"] = (-1, len(materials) - 1)
 
     times = (np.asarray(frames, dtype=np.float64) / source.fps).astype(np.float32)

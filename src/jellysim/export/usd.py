@@ -1,8 +1,11 @@
 """USD export (usd-core): one stage with the whole animation, for Blender, Houdini, Omniverse.
 
 ``OUT/<scene name>.usdc``: ``metersPerUnit = 1``, ``upAxis = Z``, default prim ``/Jellyfish`` (an
-Xform), time codes = frame indices at ``timeCodesPerSecond = fps``. Children, as the result has
-them:
+Xform), time codes = frame indices at ``timeCodesPerSecond = framesPerSecond = fps``. Children, as
+the result has them, each bound to a UsdPreviewSurface material under ``/Jellyfish/Looks`` (the
+shared materials of :mod:`jellysim.render.materials`: ``diffuseColor``, ``opacity``,
+``emissiveColor``, ``roughness``, linear RGB) and carrying the same colour and opacity as
+``displayColor``/``displayOpacity``:
 
 - ``Bell``: a ``Mesh`` (triangles, counter-clockwise seen from outside, right-handed) with
   time-sampled ``points`` and ``extent``;
@@ -27,6 +30,7 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.io.result import Result
+from jellysim.render.materials import Material, bell_material, fluid_material, tentacle_material
 
 
 def _extent(points: np.ndarray, pad: float = 0.0) -> list[tuple[float, float, float]]:
@@ -57,10 +61,10 @@ def stage_settings(
 ) -> dict[str, Any]:
     """The settings written into the stage's metadata and the Blender script (plain values)."""
     from jellysim._version import __version__
-    from jellysim.render.frame import FLUID_COLOR
     from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 
     look = scene_look(scene)
+    bell = bell_material(look)
     return {
         "generator": f"jellysim {__version__}",
         "scene": scene.name,
@@ -71,13 +75,14 @@ def stage_settings(
         "fps": fps,
         "bounds_min": [float(v) for v in low],
         "bounds_max": [float(v) for v in high],
-        "bell_color": [float(v) for v in look.bell_color],
+        "bell_color": [float(v) for v in bell.base_color],
+        "bell_emissive": [float(v) for v in bell.emissive],
         "bell_transparency": float(look.bell_transparency),
         "glow": float(look.glow),
-        "tentacle_color": [float(v) for v in look.tentacle_color],
+        "tentacle_color": [float(v) for v in tentacle_material(look).base_color],
         "tentacle_radius": float(look.tentacle_radius),
         "water_color": [float(v) for v in look.water_color],
-        "fluid_color": [float(v) for v in FLUID_COLOR],
+        "fluid_color": [float(v) for v in fluid_material().base_color],
         "view_direction": [float(v) for v in VIEW_DIRECTION],
         "field_of_view": float(FIELD_OF_VIEW),
     }
@@ -102,10 +107,35 @@ def write_blender_script(path: Path, settings: dict[str, Any]) -> Path:
     return path
 
 
+def _bind_material(stage: Any, prim: Any, material: Material) -> None:
+    """Give ``prim`` the shared ``material`` as a UsdPreviewSurface (linear RGB, as
+    UsdPreviewSurface wants) at ``/Jellyfish/Looks/<name>``, bound to it, and as its
+    ``displayColor``/``displayOpacity`` for viewers that read only those."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
+
+    path = f"/Jellyfish/Looks/{material.name.capitalize()}"
+    shading = UsdShade.Material.Define(stage, path)
+    shader = UsdShade.Shader.Define(stage, f"{path}/PreviewSurface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    color = Gf.Vec3f(*material.base_color)
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(color)
+    shader.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set(
+        Gf.Vec3f(*material.emissive)
+    )
+    shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(material.opacity)
+    shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(material.roughness)
+    shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+    shading.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(prim).Bind(shading)
+    gprim = UsdGeom.Gprim(prim)
+    gprim.CreateDisplayColorAttr(Vt.Vec3fArray([color]))
+    gprim.CreateDisplayOpacityAttr(Vt.FloatArray([material.opacity]))
+
+
 def export_usd(
     result: Result, out: Path, frames: range, interpolation: int | None = None
 ) -> list[Path]:
-    from pxr import Gf, Usd, UsdGeom, Vt
+    from pxr import Usd, UsdGeom, Vt
 
     from jellysim.render.frame import tentacle_radii
     from jellysim.render.pipeline import scene_look
@@ -122,6 +152,8 @@ def export_usd(
     stage.SetStartTimeCode(frames[0])
     stage.SetEndTimeCode(frames[-1])
     stage.SetTimeCodesPerSecond(float(f.attrs["fps"]))
+    stage.SetFramesPerSecond(float(f.attrs["fps"]))  # importers play at this rate
+    look = scene_look(scene)
     low, high = np.full(3, np.inf), np.full(3, -np.inf)  # everything over the frames, m
 
     if result.has(fields.BELL_SURFACE_VERTICES):
@@ -131,8 +163,7 @@ def export_usd(
         bell.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
         bell.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
         bell.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-        color = Gf.Vec3f(*scene.look.bell_color)
-        bell.CreateDisplayColorAttr(Vt.Vec3fArray([color]))
+        _bind_material(stage, bell.GetPrim(), bell_material(look))
         points_attr, extent_attr = bell.CreatePointsAttr(), bell.CreateExtentAttr()
         for frame in frames:
             points = result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float32)
@@ -149,12 +180,11 @@ def export_usd(
         curves = UsdGeom.BasisCurves.Define(stage, "/Jellyfish/Tentacles")
         curves.CreateTypeAttr(UsdGeom.Tokens.linear)
         curves.CreateCurveVertexCountsAttr(Vt.IntArray([particles] * count))
-        radii = tentacle_radii(particles, scene_look(scene))
+        radii = tentacle_radii(particles, look)
         widths = np.tile(2.0 * radii, count).astype(np.float32)
         curves.CreateWidthsAttr(Vt.FloatArray.FromNumpy(widths))
         curves.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
-        color = Gf.Vec3f(*scene.look.tentacle_color)
-        curves.CreateDisplayColorAttr(Vt.Vec3fArray([color]))
+        _bind_material(stage, curves.GetPrim(), tentacle_material(look))
         points_attr, extent_attr = curves.CreatePointsAttr(), curves.CreateExtentAttr()
         for frame in frames:
             points = drawn[frame].reshape(-1, 3).astype(np.float32)
@@ -168,6 +198,7 @@ def export_usd(
         spacing = float(f.attrs.get("particle_spacing", 0.01))
         cloud.CreateWidthsAttr(Vt.FloatArray([spacing]))
         cloud.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+        _bind_material(stage, cloud.GetPrim(), fluid_material())
         points_attr, extent_attr = cloud.CreatePointsAttr(), cloud.CreateExtentAttr()
         for frame in frames:
             alive = result.read(fields.FLUID_ALIVE, frame)

@@ -19,7 +19,7 @@ import math
 import shutil
 import subprocess
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,16 @@ from jellysim.render.frame import (
     Look,
     tentacle_radii,
     vertex_normals,
+)
+from jellysim.render.materials import (
+    GLOW_EMISSION,
+    STRIPE_PROFILE,
+    STRIPE_TRANSMIT,
+    bell_material,
+    bell_transmit,
+    stripe_color,
+    tentacle_face_color,
+    tentacle_material,
 )
 
 INCLUDE_DIRS = (
@@ -225,18 +235,6 @@ def light_shafts_block(camera: Camera, look: Look, water: Iterable[float], seed:
 FRESNEL_SAMPLES = (0.0, 0.3, 0.55, 0.75, 0.9, 1.0)  # of the way from face-on to the silhouette
 
 
-def bell_transmit(look: Look, theta: float) -> tuple[float, float]:
-    """The bell's transmit and how far its colour is lightened towards white, seen at ``theta``
-    (rad) from its normal: a Fresnel-like falloff ``w = (1 - cos theta)^1.5`` from face-on,
-    where the transparency ``t`` moves ``look.rim`` of the way towards clear, to the silhouette,
-    where it moves ``look.rim`` of the way towards opaque and the colour ``look.rim`` of the way
-    towards white: ``transmit = face - (face - edge) w``, ``lighten = rim w``."""
-    t, rim = look.bell_transparency, look.rim
-    face, edge = t + (1.0 - t) * rim, t * (1.0 - rim)
-    weight = (1.0 - math.cos(theta)) ** 1.5
-    return face - (face - edge) * weight, rim * weight
-
-
 def is_closed(faces: np.ndarray) -> bool:
     """Whether a triangle mesh (faces (M, 3) int) is closed: every edge in exactly two faces."""
     edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
@@ -249,17 +247,18 @@ def _bell_pigment(jelly: Jellyfish, transmit: float, centre: np.ndarray, lighten
     with ``look.stripes`` radial stripes about the bell's axis through ``centre`` (a lobe's tip
     at angle 0 has one)."""
     look = jelly.look
-    bell = np.asarray(look.bell_color, dtype=np.float64)
-    bell = bell + lighten * (1.0 - bell)
-    plain = f"rgbt <{_rgb(bell)[1:-1]},{transmit:.3g}>"
+    bell = np.asarray(bell_material(look).base_color, dtype=np.float64)
+    plain = f"rgbt <{_rgb(bell + lighten * (1.0 - bell))[1:-1]},{transmit:.3g}>"
     if look.stripes <= 0:
         return plain
-    stripe = 0.35 * bell + 0.65 * np.asarray(look.tentacle_color, dtype=np.float64)
-    dark = f"rgbt <{_rgb(stripe)[1:-1]},{0.6 * transmit:.3g}>"
-    return (
-        f"radial frequency {look.stripes} color_map {{ [0 {dark}] [0.1 {dark}] [0.3 {plain}] "
-        f"[0.7 {plain}] [0.9 {dark}] [1 {dark}] }} translate {vec(centre)}"
+    stripe = np.asarray(stripe_color(look), dtype=np.float64)
+    dark = (
+        f"rgbt <{_rgb(stripe + lighten * (1.0 - stripe))[1:-1]},{STRIPE_TRANSMIT * transmit:.3g}>"
     )
+    entries = " ".join(
+        f"[{position:.3g} {dark if weight > 0.5 else plain}]" for position, weight in STRIPE_PROFILE
+    )
+    return f"radial frequency {look.stripes} color_map {{ {entries} }} translate {vec(centre)}"
 
 
 def bell_block(jelly: Jellyfish, quality: Quality) -> str:
@@ -277,15 +276,15 @@ def bell_block(jelly: Jellyfish, quality: Quality) -> str:
     size = float(np.ptp(vertices, axis=0).max())
     entries = []
     for fraction in FRESNEL_SAMPLES:
-        transmit, lighten = bell_transmit(look, 0.5 * math.pi * fraction)
-        pigment = _bell_pigment(jelly, transmit, centre, lighten)
+        transmit, lighten = bell_transmit(look, math.cos(0.5 * math.pi * fraction))
+        pigment = _bell_pigment(jelly, float(transmit), centre, float(lighten))
         # aoi: 1 face-on, 0.5 at the silhouette, 0 face-on again from behind.
         for value in sorted({0.5 * fraction, 1.0 - 0.5 * fraction}):
             entries.append((value, pigment))
     entries.sort(key=lambda entry: entry[0])
     pigment_map = " ".join(f"[{value:.4g} {pigment}]" for value, pigment in entries)
     finish = "finish { ambient 0.1 diffuse 0.3 specular 0.3 roughness 0.005"
-    finish += f" emission {0.6 * look.glow:.3g} }}" if quality.glow else " }"
+    finish += f" emission {GLOW_EMISSION * look.glow:.3g} }}" if quality.glow else " }"
     interior, inside = "", ""
     if quality.glow:
         interior = " interior { ior 1.02 }"
@@ -337,11 +336,11 @@ def tentacles_block(jelly: Jellyfish, water: Iterable[float]) -> str:
             parts.append(f"cone{{{points[i]},{radii[i]:.4g},{points[i + 1]},{radii[i + 1]:.4g}}}")
             if i > 0:
                 parts.append(f"sphere{{{points[i]},{radii[i]:.4g}}}")
-    color = np.asarray(jelly.look.tentacle_color, dtype=np.float64)
-    see_through = jelly.look.tentacle_transparency
-    deep = 0.25 * np.asarray(tuple(water), dtype=np.float64)
-    clear = f"rgb {_rgb((1.0 - see_through) * color + see_through * deep)}"
-    edge = f"rgb {_rgb(color)}"
+    # The deep water behind is the scene's (a school's first jellyfish's), not this one's.
+    red, green, blue = (float(c) for c in water)
+    look = replace(jelly.look, water_color=(red, green, blue))
+    clear = f"rgb {_rgb(tentacle_face_color(look))}"
+    edge = f"rgb {_rgb(tentacle_material(look).base_color)}"
     parts.append(
         f"texture {{ pigment {{ aoi color_map {{ [0 {clear}] [0.3 {clear}] [0.5 {edge}] "
         f"[0.7 {clear}] [1 {clear}] }} }} "

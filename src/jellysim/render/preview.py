@@ -14,10 +14,13 @@ Matplotlib ``PolyCollection``, sorted far to near by the distance of its centre 
   ``BOTTOM_DARKENING`` times it at the bottom.
 - Bell: flat-coloured triangles, Lambert shading of the face's mean vertex normal (two-sided: the
   normal is turned towards the camera) plus ``AMBIENT``, lit by a key light from above and from
-  the camera's side (``KEY_LIGHT_UP``, ``KEY_LIGHT_BACK``); opacity ``1 - bell_transparency``.
+  the camera's side (``KEY_LIGHT_UP``, ``KEY_LIGHT_BACK``); colour and opacity from the shared
+  materials (:mod:`jellysim.render.materials`): ``1 - bell_transparency`` opaque, clearer
+  face-on and opaque and lighter at the silhouette (``rim``), with ``stripes`` radial stripes.
 - Tentacles: opaque ribbons of quadrilaterals, one per segment, whose half-width at each
   particle is the radius from :func:`tentacle_radii` projected at its depth (``r f / z_c``, at
-  least ``MIN_HALF_WIDTH``), lit as thin cylinders: brightness ``TENTACLE_AMBIENT +
+  least ``MIN_HALF_WIDTH``), in the tentacle's face-on colour (``tentacle_transparency``), lit
+  as thin cylinders: brightness ``TENTACLE_AMBIENT +
   (1 - TENTACLE_AMBIENT) sin a`` with ``a`` the angle between the segment and the key light.
 - Fluid particles: translucent hexagons of radius ``fluid_radius`` projected (at least
   ``MIN_HALF_WIDTH``), in the water colour moved ``FLUID_TINT`` of the way to white.
@@ -52,6 +55,15 @@ from PIL import Image  # Pillow: a dependency of Matplotlib, which writes PNGs w
 
 from jellysim.errors import InputError
 from jellysim.render.frame import Camera, Frame, Jellyfish, Look, tentacle_radii, vertex_normals
+from jellysim.render.materials import (
+    STRIPE_TRANSMIT,
+    bell_material,
+    bell_transmit,
+    srgb,
+    stripe_color,
+    stripe_weight,
+    tentacle_face_color,
+)
 
 SUPERSAMPLING = {"draft": 1, "final": 3}  # quality name -> rasterised pixels per output pixel
 DPI = 72.0  # one point is one pixel; n / 72 * 72 == n exactly for every n up to 30,000 px
@@ -216,13 +228,33 @@ def bell_primitives(jellyfish: Jellyfish, view: View, near: float) -> Primitives
     normal /= np.where(length > 0.0, length, 1.0)
     lambert = np.clip(normal @ key_light(view), 0.0, 1.0)
     brightness = AMBIENT + (1.0 - AMBIENT) * lambert
-    rgb = np.asarray(jellyfish.look.bell_color) * brightness[:, None]
-    alpha = np.full(len(faces), 1.0 - jellyfish.look.bell_transparency)
+    cos_theta = np.einsum("ij,ij->i", normal, to_camera) / np.linalg.norm(to_camera, axis=1)
+    axis_offset = centroid - vertices.mean(axis=0)
+    azimuth = np.arctan2(axis_offset[:, 0], axis_offset[:, 1])
+    color, alpha = bell_shading(jellyfish.look, cos_theta, azimuth)
+    rgb = color * brightness[:, None]
     return Primitives(
         corners=np.concatenate([corners, corners[:, 2:]], axis=1),
         rgba=np.column_stack([rgb, alpha]),
         distance=np.linalg.norm(to_camera, axis=1),
     )
+
+
+def bell_shading(
+    look: Look, cos_theta: np.ndarray, azimuth: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unlit colour (n, 3) linear RGB and opacity (n,) of bell faces seen at ``theta`` from
+    their normal and lying at ``azimuth`` (rad) about the bell's vertical axis: the bell's
+    material with the stripes of :func:`~jellysim.render.materials.stripe_weight` mixed in
+    (``STRIPE_TRANSMIT`` times as clear) and the Fresnel-like rim of
+    :func:`~jellysim.render.materials.bell_transmit` (as POV-Ray draws them)."""
+    transmit, lighten = bell_transmit(look, cos_theta)
+    stripe = stripe_weight(look, azimuth)[:, None]
+    bell = np.asarray(bell_material(look).base_color, dtype=np.float64)
+    color = (1.0 - stripe) * bell + stripe * np.asarray(stripe_color(look), dtype=np.float64)
+    color = color + lighten[:, None] * (1.0 - color)
+    clear = transmit * (1.0 - (1.0 - STRIPE_TRANSMIT) * stripe[:, 0])
+    return color, 1.0 - clear
 
 
 def tentacle_primitives(jellyfish: Jellyfish, view: View, near: float, samples: int) -> Primitives:
@@ -258,7 +290,8 @@ def tentacle_primitives(jellyfish: Jellyfish, view: View, near: float, samples: 
     cosine = (segment @ key_light(view)) / np.where(seg_length > 0.0, seg_length, 1.0)
     sine = np.sqrt(np.clip(1.0 - cosine**2, 0.0, 1.0))
     brightness = TENTACLE_AMBIENT + (1.0 - TENTACLE_AMBIENT) * sine
-    rgb = np.asarray(jellyfish.look.tentacle_color) * brightness[:, None]
+    # A ribbon faces the camera: the tentacle's face-on colour (as POV-Ray's tubes show it).
+    rgb = np.asarray(tentacle_face_color(jellyfish.look)) * brightness[:, None]
     count = len(rgb)
     return Primitives(
         corners=corners[keep],
@@ -328,12 +361,6 @@ def fog(drawn: Primitives, row_colors: np.ndarray, front: float, length: float) 
     rgba = drawn.rgba.copy()
     rgba[:, :3] = row_colors[row] + (rgba[:, :3] - row_colors[row]) * keep
     return drawn._replace(rgba=rgba)
-
-
-def srgb(linear: np.ndarray) -> np.ndarray:
-    """The sRGB encoding (IEC 61966-2-1) of linear RGB values in [0, 1], same shape."""
-    linear = np.clip(linear, 0.0, 1.0)
-    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1.0 / 2.4) - 0.055)
 
 
 def rasterise(drawn: Primitives, row_colors: np.ndarray, view: View) -> np.ndarray:

@@ -133,6 +133,13 @@ class ResultData:
     """
 
     def __init__(self, result: Result) -> None:
+        from jellysim.render.materials import (
+            STRIPE_TRANSMIT,
+            bell_material,
+            stripe_color,
+            tentacle_face_color,
+            tentacle_material,
+        )
         from jellysim.render.pipeline import fluid_radius, scene_look
 
         f = result.file
@@ -165,6 +172,7 @@ class ResultData:
             int(result.dataset(fields.BELL_SURFACE_FACES).shape[0]) if self.has_bell else 0
         )
         look = scene_look(scene)
+        bell, tentacle = bell_material(look), tentacle_material(look)
         self._meta: dict[str, Any] = {
             "name": str(scene.name),
             "fps": float(f.attrs.get("fps", scene.fps)),
@@ -172,9 +180,15 @@ class ResultData:
             "complete": bool(f.attrs.get("frames_expected", self.frames) == self.frames),
             "time": [float(t) for t in result.time],
             "look": {
-                "bell_color": _color(look.bell_color),
-                "tentacle_color": _color(look.tentacle_color),
+                "bell_color": _color(bell.base_color),
+                "tentacle_color": _color(tentacle.base_color),
                 "bell_transparency": float(look.bell_transparency),
+                "bell_emissive": _color(bell.emissive),
+                "tentacle_face_color": _color(tentacle_face_color(look)),
+                "rim": float(look.rim),
+                "stripes": int(look.stripes),
+                "stripe_color": _color(stripe_color(look)),
+                "stripe_transmit": STRIPE_TRANSMIT,
                 "water_color": _color(look.water_color),
                 "tentacle_radius": float(look.tentacle_radius),
                 "tentacle_taper": float(look.tentacle_taper),

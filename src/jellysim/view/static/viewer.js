@@ -48,21 +48,76 @@ function showError(error) {
 
 const linear = (rgb) => new THREE.Color().setRGB(rgb[0], rgb[1], rgb[2], THREE.LinearSRGBColorSpace);
 
+// The bell's material: Phong lighting of the shared material's colour, glow and opacity, with
+// the Fresnel-like rim and radial stripes of jellysim.render.materials (bell_transmit,
+// stripe_weight) added to the shader, as POV-Ray and the preview draw them. The stripes turn
+// about the bell's vertical axis through uniform bellCentre (set each frame).
+function bellMaterial(look) {
+  const t = look.bell_transparency;
+  const uniforms = {
+    rimFace: { value: t + (1 - t) * look.rim }, // transmit face-on
+    rimEdge: { value: t * (1 - look.rim) }, // transmit at the silhouette
+    rimLighten: { value: look.rim },
+    stripes: { value: look.stripes },
+    stripeColor: { value: linear(look.stripe_color) },
+    stripeTransmit: { value: look.stripe_transmit },
+    bellCentre: { value: new THREE.Vector3() },
+  };
+  const material = new THREE.MeshPhongMaterial({
+    color: linear(look.bell_color),
+    emissive: linear(look.bell_emissive),
+    transparent: true,
+    opacity: 1 - t,
+    side: THREE.DoubleSide,
+    depthWrite: false,
+    shininess: 40,
+  });
+  material.onBeforeCompile = (shader) => {
+    Object.assign(shader.uniforms, uniforms);
+    shader.vertexShader = shader.vertexShader
+      .replace("#include <common>", "#include <common>\nvarying vec3 vBellWorld;")
+      .replace(
+        "#include <worldpos_vertex>",
+        "#include <worldpos_vertex>\nvBellWorld = (modelMatrix * vec4(transformed, 1.0)).xyz;",
+      );
+    shader.fragmentShader = shader.fragmentShader
+      .replace(
+        "#include <common>",
+        `#include <common>
+varying vec3 vBellWorld;
+uniform float rimFace, rimEdge, rimLighten, stripes, stripeTransmit;
+uniform vec3 stripeColor, bellCentre;
+float stripeWeight() {
+  if (stripes <= 0.0) return 0.0;
+  vec2 offset = vBellWorld.xy - bellCentre.xy;
+  float phase = fract(atan(offset.x, offset.y) * stripes / (2.0 * PI));
+  return clamp(max((0.3 - phase) / 0.2, (phase - 0.7) / 0.2), 0.0, 1.0);
+}`,
+      )
+      .replace(
+        "#include <color_fragment>",
+        "#include <color_fragment>\nfloat stripe = stripeWeight();\ndiffuseColor.rgb = mix(diffuseColor.rgb, stripeColor, stripe);",
+      )
+      .replace(
+        "#include <opaque_fragment>",
+        `#include <opaque_fragment>
+float rimWeight = pow(1.0 - clamp(abs(dot(normal, normalize(vViewPosition))), 0.0, 1.0), 1.5);
+float transmit = (rimFace - (rimFace - rimEdge) * rimWeight) * (1.0 - (1.0 - stripeTransmit) * stripe);
+gl_FragColor.rgb = mix(gl_FragColor.rgb, vec3(1.0), rimLighten * rimWeight);
+gl_FragColor.a = 1.0 - transmit;`,
+      );
+  };
+  material.userData.uniforms = uniforms;
+  return material;
+}
+
 function makeBell(meta, faces) {
   const geometry = new THREE.BufferGeometry();
   const positions = new THREE.BufferAttribute(new Float32Array(meta.bell.vertices * 3), 3);
   positions.setUsage(THREE.DynamicDrawUsage);
   geometry.setAttribute("position", positions);
   geometry.setIndex(new THREE.BufferAttribute(faces, 1));
-  const material = new THREE.MeshPhongMaterial({
-    color: linear(meta.look.bell_color),
-    transparent: true,
-    opacity: 1 - meta.look.bell_transparency,
-    side: THREE.DoubleSide,
-    depthWrite: false,
-    shininess: 40,
-  });
-  const mesh = new THREE.Mesh(geometry, material);
+  const mesh = new THREE.Mesh(geometry, bellMaterial(meta.look));
   mesh.frustumCulled = false;
   return mesh;
 }
@@ -152,7 +207,9 @@ async function main() {
   if (bell) scene.add(bell);
   const tentacles = new THREE.LineSegments(
     new THREE.BufferGeometry(),
-    new THREE.LineBasicMaterial({ color: linear(meta.look.tentacle_color) }),
+    // Lines face the camera: the tentacles' face-on colour (tentacle_transparency), as the
+    // preview's ribbons and the middle of POV-Ray's tubes show them.
+    new THREE.LineBasicMaterial({ color: linear(meta.look.tentacle_face_color) }),
   );
   tentacles.frustumCulled = false;
   scene.add(tentacles);
@@ -232,6 +289,7 @@ async function main() {
       positions.array.set(data.bell);
       positions.needsUpdate = true;
       bell.geometry.computeVertexNormals();
+      bell.material.userData.uniforms.bellCentre.value.copy(meanOf(data.bell, 3, meta.bell.vertices));
     }
     if (data.tentacles) {
       const particles = meta.tentacles.particles;

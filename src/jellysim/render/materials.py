@@ -1,0 +1,129 @@
+"""One look, every output (issue 25): the materials every renderer and export derives from a
+:class:`~jellysim.render.frame.Look`, so POV-Ray, the preview renderer, the viewer, USD and glTF
+cannot drift apart in colour.
+
+Colours are linear RGB in [0, 1] throughout; :func:`srgb` encodes them only where a format
+stores sRGB (the preview's PNG). glTF's ``baseColorFactor``/``emissiveFactor``, USD's
+UsdPreviewSurface inputs and three.js colours set in ``LinearSRGBColorSpace`` take linear values.
+
+The view-dependent terms (the bell's Fresnel-like rim, its radial stripes, a tentacle seen
+face-on through ``tentacle_transparency``) are defined here once too, for the outputs that can
+draw them (docs/rendering.md, "Which output honours which key").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from jellysim.render.frame import FLUID_COLOR, RGB, Look
+
+GLOW_EMISSION = 0.6  # emitted light of the bell at glow 1, fraction of its colour
+STRIPE_TENTACLE_SHARE = 0.65  # a stripe's colour: this much tentacle colour, the rest bell
+DEEP_WATER = 0.25  # the deep water behind a tentacle, fraction of water_color
+STRIPE_TRANSMIT = 0.6  # a stripe lets through this fraction of the light the bell lets through
+# The radial stripe profile over one period (0 at a stripe's centre): (position, stripe weight);
+# POV-Ray's ``radial`` color_map and the preview read the same table.
+STRIPE_PROFILE = ((0.0, 1.0), (0.1, 1.0), (0.3, 0.0), (0.7, 0.0), (0.9, 1.0), (1.0, 1.0))
+
+
+@dataclass(frozen=True)
+class Material:
+    """A surface as every output describes it: ``base_color`` and ``emissive`` linear RGB,
+    ``opacity`` 1 opaque (face-on, before the rim), ``roughness`` in [0, 1]."""
+
+    name: str
+    base_color: RGB
+    opacity: float
+    emissive: RGB
+    roughness: float
+
+
+def _rgb(values: np.ndarray) -> RGB:
+    r, g, b = (float(v) for v in values)
+    return (r, g, b)
+
+
+def bell_material(look: Look) -> Material:
+    """The bell: its colour, ``1 - bell_transparency`` opaque, glowing ``GLOW_EMISSION glow`` of
+    its colour."""
+    color = np.asarray(look.bell_color, dtype=np.float64)
+    return Material(
+        name="bell",
+        base_color=_rgb(color),
+        opacity=1.0 - float(look.bell_transparency),
+        emissive=_rgb(GLOW_EMISSION * look.glow * color),
+        roughness=0.3,
+    )
+
+
+def tentacle_material(look: Look) -> Material:
+    """The tentacles: their colour, opaque (their transparency is faked face-on, see
+    :func:`tentacle_face_color`), no glow."""
+    return Material(
+        name="tentacles",
+        base_color=_rgb(np.asarray(look.tentacle_color, dtype=np.float64)),
+        opacity=1.0,
+        emissive=(0.0, 0.0, 0.0),
+        roughness=0.6,
+    )
+
+
+def fluid_material() -> Material:
+    """The fluid particles: ``FLUID_COLOR``, opaque."""
+    return Material("fluid", FLUID_COLOR, 1.0, (0.0, 0.0, 0.0), 0.2)
+
+
+def tentacle_face_color(look: Look) -> RGB:
+    """A tentacle seen face-on: its colour mixed ``tentacle_transparency`` of the way towards
+    the deep water (``DEEP_WATER water_color``), as a clear tube in dark water looks; at its
+    silhouette edges it shows its own colour."""
+    color = np.asarray(look.tentacle_color, dtype=np.float64)
+    deep = DEEP_WATER * np.asarray(look.water_color, dtype=np.float64)
+    t = float(look.tentacle_transparency)
+    return _rgb((1.0 - t) * color + t * deep)
+
+
+def stripe_color(look: Look) -> RGB:
+    """The colour of the bell's radial stripes: ``STRIPE_TENTACLE_SHARE`` tentacle colour, the
+    rest bell colour."""
+    bell = np.asarray(look.bell_color, dtype=np.float64)
+    tentacle = np.asarray(look.tentacle_color, dtype=np.float64)
+    return _rgb((1.0 - STRIPE_TENTACLE_SHARE) * bell + STRIPE_TENTACLE_SHARE * tentacle)
+
+
+def rim_weight(cos_theta: np.ndarray | float) -> np.ndarray:
+    """The Fresnel-like falloff ``w = (1 - |cos theta|)^1.5``: 0 face-on, 1 at the silhouette
+    (``theta`` the angle between the surface normal and the direction to the eye)."""
+    return (1.0 - np.clip(np.abs(cos_theta), 0.0, 1.0)) ** 1.5
+
+
+def bell_transmit(look: Look, cos_theta: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """The bell's transmitted fraction and how far its colour is lightened towards white, seen
+    at ``theta`` from its normal: face-on the transparency ``t`` moves ``look.rim`` of the way
+    towards clear, at the silhouette ``look.rim`` of the way towards opaque and the colour
+    ``look.rim`` of the way towards white: ``transmit = face - (face - edge) w``,
+    ``lighten = rim w`` with ``w`` from :func:`rim_weight`."""
+    t, rim = float(look.bell_transparency), float(look.rim)
+    face, edge = t + (1.0 - t) * rim, t * (1.0 - rim)
+    weight = rim_weight(cos_theta)
+    return face - (face - edge) * weight, rim * weight
+
+
+def stripe_weight(look: Look, azimuth: np.ndarray) -> np.ndarray:
+    """How much of the stripe colour shows at ``azimuth`` (rad) about the bell's axis, 0 to 1:
+    ``look.stripes`` stripes, one centred at azimuth 0, over :data:`STRIPE_PROFILE`."""
+    azimuth = np.asarray(azimuth, dtype=np.float64)
+    if look.stripes <= 0:
+        return np.zeros_like(azimuth)
+    phase = np.mod(azimuth * look.stripes / (2.0 * math.pi), 1.0)
+    positions, weights = zip(*STRIPE_PROFILE, strict=True)
+    return np.interp(phase, positions, weights)
+
+
+def srgb(linear: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function (IEC 61966-2-1) of linear values in [0, 1], any shape."""
+    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
