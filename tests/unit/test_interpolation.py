@@ -288,5 +288,8 @@ def test_a_curled_scene_blends_curvatures_and_a_straight_one_positions(brown):
     )
     np.testing.assert_array_equal(interpolate_result(curled, 3), expected)
     assert np.abs(expected - straight).max() > 1e-6
+    # The viewer's windows of frames are slices of the whole here too.
+    window = interpolate_result(curled, 3, frames=(17, 40))
+    np.testing.assert_allclose(window, expected[17:40], rtol=0, atol=1e-12)
     with pytest.raises(ValueError, match="shape_space"):
         interpolate_tentacles(positions, margin, brown.time, 3, 0.01, shape_space="angles")
