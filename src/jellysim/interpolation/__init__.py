@@ -6,7 +6,9 @@ j = 0..N-1 at fraction ``t = j / N`` gets (docs/theory/interpolation.md):
 
 - its root on the margin, at the angle ``phi_k + t (phi_{k+1} - phi_k)`` about the bell axis,
 - its shape blended in each root's local frame (radial, tangential, axial) with the paper's
-  cosine weight ``w = (1 - cos(pi t)) / 2``: ``s = (1 - w) s_k + w s_{k+1}``,
+  cosine weight ``w = (1 - cos(pi t)) / 2``: ``s = (1 - w) s_k + w s_{k+1}``; for curled
+  tentacles (a scene with a rest curvature) the chains' discrete curvature vectors in Bishop
+  frames are blended instead and the drawn chain is rebuilt from them (:data:`SHAPE_SPACES`),
 - its segment lengths restored to d by walking the blended polyline from the root,
 - a time lag that breaks up the banding of cosine weights (shapes bunch near the simulated
   tentacles): every other drawn tentacle shows its shape ``lag`` earlier, so that neighbours
@@ -21,6 +23,7 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.config.schema import Scene
+from jellysim.tentacle.model import curl_normals, rest_shape_for
 
 
 def cosine_weight(t: np.ndarray) -> np.ndarray:
@@ -92,6 +95,142 @@ def interpolation_lags(count: int, factor: int, spread: float) -> np.ndarray:
     return lags
 
 
+class ShapeSpace(Protocol):
+    """Coordinates in which the shapes of simulated tentacles are blended.
+
+    ``encode`` takes shapes (N, P, 3), m, in their roots' local frames (root at the origin) and
+    returns coordinates (N, Q, 3) that are blended linearly (in time between frames, then with
+    the cosine weights between neighbours); ``decode`` turns blended coordinates back into
+    local shapes (N, P, 3), m, which are then placed at the drawn roots and walked to lengths d.
+    """
+
+    def encode(self, shapes: np.ndarray) -> np.ndarray: ...
+
+    def decode(self, coordinates: np.ndarray, spacing: float) -> np.ndarray: ...
+
+
+class Positions:
+    """Blend the particle positions themselves (docs/theory/interpolation.md, step 2)."""
+
+    def encode(self, shapes: np.ndarray) -> np.ndarray:
+        return shapes
+
+    def decode(self, coordinates: np.ndarray, spacing: float) -> np.ndarray:
+        return coordinates
+
+
+RADIAL = np.array([1.0, 0.0, 0.0])  # the outward radial direction in a root's local frame
+AXIAL = np.array([0.0, 0.0, 1.0])  # the bell axis in a root's local frame
+MAX_CURVATURE_GAIN = 2.0  # Eq. (I3): at most this rescaling of a blended curvature vector
+
+
+def bishop_normals(tangents: np.ndarray) -> np.ndarray:
+    """Root normals (N, 3) of Bishop frames for first tangents (N, 3) in local frames: the
+    outward radial direction made perpendicular to the tangent, as the rest shape's root frame
+    (docs/theory/tentacle.md §6; the bell axis where the tangent points outward)."""
+    normals = curl_normals(
+        tangents[None],
+        np.broadcast_to(RADIAL, tangents.shape)[None],
+        AXIAL[None],
+    )
+    return normals[0]
+
+
+def bishop_step(
+    tangent: np.ndarray, normal: np.ndarray, curvature: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Turn the Bishop frame (tangent, normal) (N, 3) by the discrete curvature vector
+    ``curvature`` (N, 2), rad, in the (normal, binormal) plane, Eq. (I2): the rotation by
+    theta = |c| about the axis t x u, u = (c_n n + c_b b) / theta, which takes t to
+    ``cos theta t + sin theta u`` and transports the normal without twist (Eq. T11)."""
+    binormal = np.cross(tangent, normal)
+    theta = np.linalg.norm(curvature, axis=1)
+    safe = np.where(theta > 0.0, theta, 1.0)
+    cos_phi = np.where(theta > 0.0, curvature[:, 0] / safe, 1.0)[:, None]
+    sin_phi = np.where(theta > 0.0, curvature[:, 1] / safe, 0.0)[:, None]
+    bend = cos_phi * normal + sin_phi * binormal
+    cos_t, sin_t = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    new_tangent = cos_t * tangent + sin_t * bend
+    new_normal = normal + cos_phi * ((cos_t - 1.0) * bend - sin_t * tangent)
+    return new_tangent, new_normal
+
+
+def best_rotation(moving: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Rotations (N, 3, 3) about the origin that best fit the point sets ``moving`` (N, P, 3)
+    onto ``target`` (N, P, 3) in the least-squares sense (Kabsch): R = V diag(1, 1, det) U^T
+    from the SVD U S V^T of sum_p moving_p target_p^T, Eq. (I4)."""
+    u, _, vt = np.linalg.svd(np.einsum("npi,npj->nij", moving, target))
+    sign = np.ones(moving.shape[0:1] + (3,))
+    sign[:, 2] = np.sign(np.linalg.det(np.einsum("nij,njk->nik", u, vt)))
+    return np.einsum("nji,nj,nkj->nik", vt, sign, u)
+
+
+class BishopCurvatures:
+    """Blend discrete curvature vectors in Bishop frames and rebuild the chain, Eq. (I2-I4).
+
+    Coordinates (N, 2P - 1, 3): rows 0..P-1 the positions (placed as for :class:`Positions`),
+    then row P the first segment's unit tangent and rows P+1..2P-2 at node i = 1..P-2 the
+    curvature vector c_i = theta_i (cos phi_i, sin phi_i) (the turning angle theta_i, rad,
+    between segments i-1 and i, towards the direction phi_i from the transported normal) and,
+    third, theta_i. Blending the third channel gives the mean turning angle, to which the
+    blended vector is rescaled (Eq. I3), so that coils whose bends point in different directions
+    blend into a coil of the same curvature, never into a zigzag. The chain rebuilt from the
+    curvatures is then turned rigidly about its root onto the blended positions (Eq. I4): the
+    walk alone lets small differences near the root swing the far end away from both
+    neighbours.
+    """
+
+    def encode(self, shapes: np.ndarray) -> np.ndarray:
+        segments = np.diff(shapes, axis=1)
+        tangents = segments / np.linalg.norm(segments, axis=2, keepdims=True)
+        out = np.zeros((shapes.shape[0], shapes.shape[1] - 1, 3))
+        out[:, 0] = tangents[:, 0]
+        normal = bishop_normals(tangents[:, 0])
+        for i in range(1, tangents.shape[1]):
+            before, after = tangents[:, i - 1], tangents[:, i]
+            binormal = np.cross(before, normal)
+            along_n = np.sum(after * normal, axis=1)
+            along_b = np.sum(after * binormal, axis=1)
+            sin_t = np.hypot(along_n, along_b)
+            theta = np.arctan2(sin_t, np.sum(after * before, axis=1))
+            scale = np.where(sin_t > 0.0, theta / np.where(sin_t > 0.0, sin_t, 1.0), 1.0)
+            out[:, i, 0] = scale * along_n
+            out[:, i, 1] = scale * along_b
+            out[:, i, 2] = theta
+            _, normal = bishop_step(before, normal, out[:, i, :2])
+        return np.concatenate([shapes, out], axis=1)
+
+    def decode(self, coordinates: np.ndarray, spacing: float) -> np.ndarray:
+        particles = (coordinates.shape[1] + 1) // 2
+        positions, intrinsic = coordinates[:, :particles], coordinates[:, particles:]
+        chain = self.walk(intrinsic, spacing)
+        return np.einsum("nij,npj->npi", best_rotation(chain, positions), chain)
+
+    @staticmethod
+    def walk(intrinsic: np.ndarray, spacing: float) -> np.ndarray:
+        """The chain (N, P, 3), m, from its root at the origin, of segments of length
+        ``spacing`` turned by the blended curvature vectors ``intrinsic`` (N, P - 1, 3) rescaled
+        by Eq. (I3)."""
+        tangent = intrinsic[:, 0] / np.linalg.norm(intrinsic[:, 0], axis=1, keepdims=True)
+        normal = bishop_normals(tangent)
+        vectors = intrinsic[:, 1:, :2]
+        size = np.linalg.norm(vectors, axis=2)
+        gain = np.minimum(intrinsic[:, 1:, 2] / np.where(size > 0.0, size, 1.0), MAX_CURVATURE_GAIN)
+        curvature = vectors * np.where(size > 0.0, gain, 1.0)[..., None]
+        out = np.zeros((intrinsic.shape[0], intrinsic.shape[1] + 1, 3))
+        out[:, 1] = spacing * tangent
+        for i in range(curvature.shape[1]):
+            tangent, normal = bishop_step(tangent, normal, curvature[:, i])
+            out[:, i + 2] = out[:, i + 1] + spacing * tangent
+        return out
+
+
+SHAPE_SPACES: dict[str, ShapeSpace] = {
+    "positions": Positions(),
+    "curvatures": BishopCurvatures(),
+}
+
+
 def interpolate_tentacles(
     positions: np.ndarray,
     margin: np.ndarray,
@@ -101,6 +240,7 @@ def interpolate_tentacles(
     axis: np.ndarray | None = None,
     lag_spread: float = 0.0,
     first: int = 0,
+    shape_space: str = "positions",
 ) -> np.ndarray:
     """Drawn tentacles (F - first, T * factor, P, 3) from simulated ones (F, T, P, 3).
 
@@ -108,12 +248,17 @@ def interpolate_tentacles(
     ``axis`` the bell axis (default +z, or (F, 3) per frame), ``spacing`` d (m), ``lag_spread``
     the largest time lag (s) of a drawn tentacle (0 turns the lags off). Frames before
     ``first`` are read (the lagged shapes of later frames reach back to them) but not drawn.
-    Drawn tentacle ``k * factor`` is simulated tentacle k, unchanged.
+    Drawn tentacle ``k * factor`` is simulated tentacle k, unchanged. ``shape_space`` names the
+    coordinates in which shapes are blended (:data:`SHAPE_SPACES`): "positions" (straight
+    tentacles) or "curvatures" (curled ones).
     """
     positions = np.asarray(positions, dtype=np.float64)
     n_frames, count, particles, _ = positions.shape
     if factor < 1:
         raise ValueError("factor must be >= 1")
+    if shape_space not in SHAPE_SPACES:
+        raise ValueError(f"shape_space={shape_space!r}: expected one of {sorted(SHAPE_SPACES)}")
+    space = SHAPE_SPACES[shape_space]
     if not 0 <= first < n_frames:
         raise ValueError(f"first={first}: expected 0 to {n_frames - 1}")
     axes = np.broadcast_to(
@@ -132,6 +277,7 @@ def interpolate_tentacles(
     roots = positions[:, :, 0]
     frames_sim = local_frames(roots, centres[:, None], axes[:, None])
     shapes = np.einsum("ftij,ftpj->ftpi", frames_sim, positions - roots[:, :, None])
+    shapes = space.encode(shapes.reshape(-1, *shapes.shape[2:])).reshape(n_frames, count, -1, 3)
 
     # Shapes at lagged times of the frames drawn: linear in time between stored frames, held
     # at the ends.
@@ -150,6 +296,9 @@ def interpolate_tentacles(
     blended = (1.0 - weight)[None, :, None, None] * lagged(left) + weight[
         None, :, None, None
     ] * lagged(right)
+    blended = space.decode(blended.reshape(-1, *blended.shape[2:]), spacing).reshape(
+        n_frames - first, drawn, particles, 3
+    )
 
     out = np.empty((n_frames - first, drawn, particles, 3))
     for i, f in enumerate(range(first, n_frames)):
@@ -223,6 +372,7 @@ def interpolate_result(
     # The earliest frame a lagged shape of frame `start` reads (interpolate_tentacles holds the
     # shapes at the first frame before that, so the window must begin at or before it).
     first = max(0, int(np.searchsorted(times, times[start] - max(lag, 0.0), side="right")) - 1)
+    curled = bool(np.any(rest_shape_for(scene) != 0.0))
     return interpolate_tentacles(
         result.read(fields.TENTACLE_POSITION, slice(first, stop)),
         result.read(fields.BELL_MARGIN, slice(first, stop)),
@@ -231,4 +381,5 @@ def interpolate_result(
         scene.tentacles.spacing,
         lag_spread=lag,
         first=start - first,
+        shape_space="curvatures" if curled else "positions",
     )
