@@ -426,18 +426,21 @@ class Look:
     tentacle_taper: float = param(
         0.3, gt=0.0, le=1.0, doc="drawn radius at the tip as a fraction of the root's"
     )
-    tentacle_transparency: float = param(
-        0.3,
+    tentacle_transparency: float | None = param(
+        None,
         ge=0.0,
         le=0.95,
-        doc="how much of the water shows through a tentacle seen face-on (0 opaque)",
+        nullable=True,
+        doc="how much of the water shows through a tentacle seen face-on (0 opaque; default 0.3)",
     )
-    rim: float = param(
-        0.6,
+    rim: float | None = param(
+        None,
         ge=0.0,
         le=1.0,
+        nullable=True,
         doc="Fresnel-like rim: face-on the bell's transparency moves this far towards clear, "
-        "at the silhouette this far towards opaque and lighter (0: the same at every angle)",
+        "at the silhouette this far towards opaque and lighter (0: the same at every angle; "
+        "default 0.6)",
     )
     stripes: int | None = param(
         None,
@@ -448,21 +451,29 @@ class Look:
         doc="radial stripes seen through the bell, in a mix of the bell's and the tentacles' "
         "colours (default: bell.lobes / 2, one on every other lobe; 0: none)",
     )
-    marine_snow: int = param(
-        400,
+    marine_snow: int | None = param(
+        None,
         kind="int",
         ge=0,
         le=100000,
-        doc="drifting particles (marine snow) in the water around the camera, 0 for none",
+        nullable=True,
+        doc="drifting particles (marine snow) in the water around the camera (0: none; "
+        "default 400)",
     )
-    light_shafts: float = param(
-        0.5, ge=0.0, le=1.0, doc="brightness of the light shafts from above at final quality"
+    light_shafts: float | None = param(
+        None,
+        ge=0.0,
+        le=1.0,
+        nullable=True,
+        doc="brightness of the light shafts from above at final quality (default 0.5)",
     )
-    depth_of_field: float = param(
-        1.0,
+    depth_of_field: float | None = param(
+        None,
         ge=0.0,
         le=10.0,
-        doc="focal blur at final quality, focused on the jellyfish (0: everything sharp)",
+        nullable=True,
+        doc="focal blur at final quality, focused on the jellyfish (0: everything sharp; "
+        "default 1.0)",
     )
 
 

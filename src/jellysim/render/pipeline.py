@@ -148,6 +148,13 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
     look = scene.look
     radius = look.tentacle_radius or 0.25 * scene.tentacles.spacing
     stripes = scene.bell.lobes // 2 if look.stripes is None else look.stripes
+    # Keys a scene leaves unset (so that its stored text stays as before they existed) take the
+    # renderer's defaults.
+    default = Look()
+
+    def unset(value: Any, fallback: Any) -> Any:
+        return fallback if value is None else value
+
     return Look(
         bell_color=look.bell_color,
         tentacle_color=look.tentacle_color,
@@ -156,12 +163,12 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
         water_color=look.water_color,
         tentacle_radius=radius,
         tentacle_taper=look.tentacle_taper,
-        tentacle_transparency=look.tentacle_transparency,
-        rim=look.rim,
+        tentacle_transparency=unset(look.tentacle_transparency, default.tentacle_transparency),
+        rim=unset(look.rim, default.rim),
         stripes=stripes,
-        marine_snow=look.marine_snow,
-        light_shafts=look.light_shafts,
-        depth_of_field=look.depth_of_field,
+        marine_snow=unset(look.marine_snow, default.marine_snow),
+        light_shafts=unset(look.light_shafts, default.light_shafts),
+        depth_of_field=unset(look.depth_of_field, default.depth_of_field),
     )
 
 
