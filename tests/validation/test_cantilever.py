@@ -10,8 +10,9 @@ import math
 
 import numpy as np
 import pytest
+from hanging import hang
 
-from jellysim.tentacle.kernels import Medium, advance_frame
+from jellysim.tentacle.kernels import Medium
 from jellysim.tentacle.model import build_chain_model, second_moment
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -26,22 +27,7 @@ def static_tip_deflection(bending, particles=60, spacing=0.01, modulus=5e9, load
     v = np.zeros_like(x)
     # Backward Euler with a long step converges to the static equilibrium.
     steps = 100
-    zeros = np.zeros((steps, 1, 3))
-    diagnostics = np.zeros((1, 3))
-    advance_frame(
-        x,
-        v,
-        zeros,
-        zeros,
-        zeros + DOWN,
-        zeros,
-        np.zeros_like(x),
-        zeros,
-        model,
-        medium,
-        20.0,
-        diagnostics,
-    )
+    diagnostics = hang(x, v, model, medium, steps, 20.0)
     assert diagnostics[0, 2] == -1
     assert np.abs(v).max() < 1e-9, "not settled"
     length = (particles - 1) * spacing
@@ -81,22 +67,7 @@ def test_pinned_root_carries_no_moment():
     medium = Medium(1000.0, 1.0, np.array([9.81, 0.0, 0.0]), 2000.0)
     x = (np.arange(particles)[:, None] * spacing * DOWN)[None].copy()
     v = np.zeros_like(x)
-    zeros = np.zeros((1200, 1, 3))
-    diagnostics = np.zeros((1, 3))
-    advance_frame(
-        x,
-        v,
-        zeros,
-        zeros,
-        zeros + DOWN,
-        zeros,
-        np.zeros_like(x),
-        zeros,
-        model,
-        medium,
-        0.05,
-        diagnostics,
-    )
+    diagnostics = hang(x, v, model, medium, 1200, 0.05)
     assert diagnostics[0, 2] == -1
     expected = np.arange(particles) * spacing
     np.testing.assert_allclose(x[0, :, 0], expected, atol=1e-6)

@@ -9,9 +9,10 @@ import math
 
 import numpy as np
 import pytest
+from hanging import hang
 from scipy.optimize import brentq
 
-from jellysim.tentacle.kernels import Medium, advance_frame, drag_gain
+from jellysim.tentacle.kernels import Medium, drag_gain
 from jellysim.tentacle.model import build_chain_model
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -23,22 +24,7 @@ def fall(particles, spacing, rho_t, rho_w, mu, duration, dt):
     x = (np.arange(particles)[:, None] * spacing * DOWN)[None].copy()
     v = np.zeros_like(x)
     steps = round(duration / dt)
-    zeros = np.zeros((steps, 1, 3))
-    diagnostics = np.zeros((1, 3))
-    advance_frame(
-        x,
-        v,
-        zeros,
-        zeros,
-        zeros + DOWN,
-        zeros,
-        np.zeros_like(x),
-        zeros,
-        model,
-        medium,
-        dt,
-        diagnostics,
-    )
+    diagnostics = hang(x, v, model, medium, steps, dt)
     assert diagnostics[0, 2] == -1
     return v[0]
 
