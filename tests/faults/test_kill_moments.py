@@ -113,6 +113,12 @@ def test_a_run_stopped_at_any_moment_opens_everywhere_and_resumes_bit_for_bit(
         process.send_signal(stop)
     _, stderr = process.communicate(timeout=300)
     finished = process.returncode == 0
+    if process.returncode == -stop and stop != signal.SIGKILL:
+        # The signal came after the run had let go of its handlers: the result was complete
+        # by then (docs/reliability.md), and the signal's default action ended the process.
+        with h5py.File(out / "result.h5", "r") as f:
+            assert f["time"].shape[0] == f.attrs["frames_expected"], stderr
+        finished = True
     if not finished:
         expected = -signal.SIGKILL if stop == signal.SIGKILL else 128 + stop
         assert process.returncode == expected, stderr
