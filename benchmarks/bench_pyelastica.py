@@ -55,6 +55,8 @@ OVERRIDES = {
     "tentacles.youngs_modulus": 2.4e5,
     "tentacles.bending": "euler-bernoulli",  # EI with I = pi d^4 / 64, as in the Cosserat rod
     "tentacles.root": "clamped",
+    "tentacles.rest_curvature": 0.0,  # straight at rest, as the Cosserat rod (brown-jelly curls)
+    "tentacles.rest_curvature_tip": 0.0,
     "flow.speed": 0.3,
     "flow.noise": 0.0,
     "root_motion.amplitude": 0.05,

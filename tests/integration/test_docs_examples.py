@@ -88,6 +88,12 @@ NOT_RUN = {
     "python benchmarks/motion_report.py brown-jelly forced-tentacles": "benchmarks/ are run by "
     "hand (whole preset runs); what it reports is tests/unit/test_motion.py's tentacle_motion, "
     "run there on the forced tentacles",
+    "python benchmarks/motion_report.py brown-jelly --set flow.speed=0.3 --set bell.swim_speed=0.3 "
+    "--set tentacles.particles=60 --set tentacles.rest_curvature=0 "
+    "--set tentacles.rest_curvature_tip=0": "the same benchmark with the paper's Case 1 values; "
+    "that --set reaches the preset is tests/integration/test_cli_smoke.py's and "
+    "test_preset_motion.py's, the straight step at a zero rest curvature "
+    "tests/unit/test_tentacle_curl.py's",
 }
 
 TINY_DURATION = 0.004  # s of simulated time for every documented run ...
