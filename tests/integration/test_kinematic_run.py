@@ -67,7 +67,8 @@ def test_roots_ride_the_pulsing_swimming_margin(brown: jellysim.Result) -> None:
     np.testing.assert_allclose(positions[:, :, 0], rim, atol=1e-12)
     # The bell swam its mean speed for the whole run (three whole cycles).
     centre = brown.file[fields.BELL_CENTRE.path][:, 2]
-    assert centre[-1] - centre[0] == pytest.approx(0.3 * 3.0, rel=1e-9)
+    swim_speed = brown.scene.bell.swim_speed
+    assert centre[-1] - centre[0] == pytest.approx(swim_speed * 3.0, rel=1e-9)
     # The tentacles came along, trailing behind the margin.
     tips = positions[:, :, -1, 2] - centre[:, None]
     assert np.all(tips < -0.5)
@@ -95,6 +96,9 @@ def test_a_bell_without_contraction_holds_still_and_its_tentacles_hang(tmp_path:
         "bell.swim_speed": 0.0,
         "flow.speed": 0.0,
         "flow.noise": 0.0,
+        # Straight at rest: the preset's curl would coil the slack tentacles (issue 25).
+        "tentacles.rest_curvature": 0.0,
+        "tentacles.rest_curvature_tip": 0.0,
     }
     result = jellysim.run("brown-jelly", tmp_path, overrides=overrides)
     positions = result.tentacle_positions

@@ -77,7 +77,7 @@ def test_drawn_tentacles_keep_roots_on_margin_lengths_and_simulated_shapes(brown
     factor = scene.tentacles.interpolation
     drawn = interpolate_result(brown)
     positions, margin = brown.tentacle_positions, brown.margin
-    assert drawn.shape == (positions.shape[0], 6 * factor, 60, 3)
+    assert drawn.shape == (positions.shape[0], 6 * factor, scene.tentacles.particles, 3)
     # Simulated tentacles are drawn unchanged.
     np.testing.assert_array_equal(drawn[:, ::factor], positions)
     # Segment lengths restored.

@@ -22,11 +22,28 @@ def test_substeps_fill_the_frame_exactly():
 
 
 def test_stiff_rods_get_a_bending_limited_but_affordable_substep():
-    soft, wood = plan(), plan(**{"tentacles.youngs_modulus": 9e9})
+    # Straight at rest: a curled stiff rod is limited by its explicit rest force instead
+    # (docs/theory/tentacle.md §6, test_a_curl_limits_the_substep_of_a_stiff_rod below).
+    straight = {"tentacles.rest_curvature": 0.0, "tentacles.rest_curvature_tip": 0.0}
+    soft = plan(**straight)
+    wood = plan(**straight, **{"tentacles.youngs_modulus": 9e9})
     assert min(soft.limits, key=soft.limits.get) != "bending"
     assert min(wood.limits, key=wood.limits.get) == "bending"
     assert wood.dt < soft.dt
     assert wood.dt > 100 * 5e-6  # an explicit step would need about 5 microseconds
+
+
+def test_a_curl_limits_the_substep_of_a_stiff_rod():
+    # brown-jelly curls its tentacles (issue 25): at 9 GPa the explicit rest force binds
+    # (docs/theory/tentacle.md §6), at the preset's 100 Pa it does not.
+    straight = {"tentacles.rest_curvature": 0.0, "tentacles.rest_curvature_tip": 0.0}
+    wood = {"tentacles.youngs_modulus": 9e9}
+    curled, plain = plan(**wood), plan(**straight, **wood)
+    assert min(curled.limits, key=curled.limits.get) == "rest shape"
+    assert "rest shape" not in plain.limits or plain.limits["rest shape"] > plain.dt
+    assert curled.dt < plain.dt
+    soft = plan()
+    assert min(soft.limits, key=soft.limits.get) != "rest shape"
 
 
 def test_dt_safety_scales_the_substep():
