@@ -69,9 +69,11 @@ def test_roots_ride_the_pulsing_swimming_margin(brown: jellysim.Result) -> None:
     centre = brown.file[fields.BELL_CENTRE.path][:, 2]
     swim_speed = brown.scene.bell.swim_speed
     assert centre[-1] - centre[0] == pytest.approx(swim_speed * 3.0, rel=1e-9)
-    # The tentacles came along, trailing behind the margin.
+    # The tentacles came along, trailing behind the margin; they start in their curled rest
+    # shape (issue 25) and the flow draws them out.
     tips = positions[:, :, -1, 2] - centre[:, None]
-    assert np.all(tips < -0.5)
+    assert np.all(tips < -0.05)
+    assert tips[-1].mean() < tips[0].mean() - 0.1
 
 
 @pytest.mark.parametrize(

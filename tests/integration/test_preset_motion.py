@@ -1,6 +1,8 @@
 """brown-jelly's defaults give tentacles that wave and trail (issue 25, "Motion that reads on
 screen"), and none of them rises through the bell. The numbers are docs/figures.md's table; the
-bounds are the issue's "visible waves", not the measured values."""
+bounds are the issue's "visible waves", not the measured values. Over the preset's 10 s the
+tentacles also unfurl from their curled start (docs/figures.md): this holds the preset as shipped,
+not a settled state."""
 
 from __future__ import annotations
 
