@@ -110,10 +110,10 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_view: ViewS
     assert meta["tentacles"] == {
         "present": True,
         "simulated": 6,
-        "particles": 60,
+        "particles": scene.tentacles.particles,
         "interpolation": scene.tentacles.interpolation,
         "max_interpolation": 50,
-        "frame_bytes": 6 * 60 * 3 * 4,
+        "frame_bytes": 6 * scene.tentacles.particles * 3 * 4,
     }
     assert meta["fluid"]["present"] is False and meta["fluid"]["frame_bytes"] == 0
     assert meta["limits"] == {
@@ -162,7 +162,7 @@ def test_tentacle_chunks_are_the_drawn_tentacles(
     query = "" if factor is None else f"&interpolation={factor}"
     for start, length in ((0, 13), (0, 4), (7, 4), (12, 1)):
         url = f"/frames?part=tentacles&start={start}&count={length}{query}"
-        chunk = floats(get(brown_view, url), length, count, 60, 3)
+        chunk = floats(get(brown_view, url), length, count, brown.scene.tentacles.particles, 3)
         np.testing.assert_allclose(chunk, drawn[start : start + length], rtol=0, atol=1e-6)
     # The simulated tentacles are among them, as simulated.
     every = count // 6

@@ -20,7 +20,7 @@ import jellysim
 from jellysim.view.server import TOKEN_HEADER, FrameRequest, ViewLimits, ViewServer
 
 FACTOR = 50  # drawn tentacles per simulated one: the brown jelly's largest
-SIMULATED, PARTICLES = 6, 60
+SIMULATED, PARTICLES = 6, 90  # brown-jelly's tentacles (0.9 m since issue 25's retune)
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +56,8 @@ def traced() -> Iterator[dict[str, int]]:
 def test_an_answer_over_the_limit_is_refused_before_anything_is_built(
     brown: jellysim.Result, view: ViewServer
 ) -> None:
-    whole = tentacle_bytes(brown.frames)  # 13 frames: 2.8 MB
+    assert brown.scene.tentacles.particles == PARTICLES
+    whole = tentacle_bytes(brown.frames)  # 13 frames: 4.2 MB
     limit = tentacle_bytes(4) + 100  # four frames fit
     query = f"/frames?part=tentacles&start=0&count={brown.frames}&interpolation={FACTOR}"
     with serving(brown.folder, ViewLimits(max_response_bytes=limit)) as small:
