@@ -99,7 +99,7 @@ def test_a_phase_shift_shifts_the_pulse_not_the_place(brown: jellysim.Result) ->
     for member in members[1:]:
         centres = member.centres() - member.offset
         # Same mean swim: the heights differ only by the pulse's wobble about the mean line
-        # (brown-jelly swims 0.3 m/s; a shifted pulse moves it by at most 0.1 m).
+        # (a shifted pulse moves brown-jelly by at most 0.1 m about its mean swim).
         assert np.abs(centres[:, 2] - first[:, 2]).max() < 0.1
 
 
