@@ -61,6 +61,23 @@ TENTACLE_POSITION = Field(
     "tentacles/position", ("T", "P", 3), "m", "simulated tentacle particles, root first"
 )
 TENTACLE_VELOCITY = Field("tentacles/velocity", ("T", "P", 3), "m/s", "their velocities")
+TENTACLE_GROUP = Field(
+    "tentacles/group",
+    ("T",),
+    "1",
+    "the group of each simulated tentacle, an index into the attribute tentacle_groups",
+    np.int32,
+    False,
+)
+TENTACLE_PARTICLES = Field(
+    "tentacles/particles",
+    ("T",),
+    "1",
+    "particles of each simulated tentacle; its rows beyond them in position and velocity are "
+    "NaN (groups of shorter chains)",
+    np.int32,
+    False,
+)
 TENTACLE_CONSTRAINT_ERROR = Field(
     "tentacles/constraint_error", (), "1", "largest relative segment-length error in the frame"
 )
@@ -126,6 +143,8 @@ FIELDS: tuple[Field, ...] = (
     TIME,
     TENTACLE_POSITION,
     TENTACLE_VELOCITY,
+    TENTACLE_GROUP,
+    TENTACLE_PARTICLES,
     TENTACLE_CONSTRAINT_ERROR,
     TENTACLE_PROJECTION_ITERATIONS,
     BELL_RIM,

@@ -23,11 +23,15 @@ from jellysim.errors import InputError
 from jellysim.species import preset_names
 
 REPO = Path(__file__).resolve().parents[2]
-KINDS = {"float", "int", "str", "choice", "vec3", "direction", "bool", "color"}
+KINDS = {"float", "int", "str", "choice", "vec3", "direction", "bool", "color", "angles"}
 
 
 def _value_fields() -> list[tuple[str, dataclasses.Field[object]]]:
-    fields = [(f.name, f) for f in dataclasses.fields(Scene) if f.name not in SECTIONS]
+    fields = [
+        (f.name, f)
+        for f in dataclasses.fields(Scene)
+        if f.name not in SECTIONS and not f.metadata.get("internal")
+    ]
     for section, cls in SECTIONS.items():
         fields += [(f"{section}.{f.name}", f) for f in dataclasses.fields(cls)]
     return fields
@@ -56,7 +60,11 @@ def test_every_field_has_doc_and_kind(key: str, f: dataclasses.Field[object]) ->
 
 
 def test_sections_match_scene_fields() -> None:
-    sections = [f.name for f in dataclasses.fields(Scene) if "kind" not in f.metadata]
+    sections = [
+        f.name
+        for f in dataclasses.fields(Scene)
+        if "kind" not in f.metadata and not f.metadata.get("internal")
+    ]
     assert sections == list(SECTIONS)
 
 

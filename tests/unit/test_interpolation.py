@@ -274,7 +274,11 @@ def test_a_curled_scene_blends_curvatures_and_a_straight_one_positions(brown):
     straight = interpolate_tentacles(
         positions, margin, brown.time, 3, brown.scene.tentacles.spacing, lag_spread=lag
     )
-    np.testing.assert_array_equal(interpolate_result(brown, 3), straight)
+    straight_scene = jellysim.load_scene(
+        brown.scene, {"tentacles.rest_curvature": 0.0, "tentacles.rest_curvature_tip": 0.0}
+    )
+    as_straight = SimpleNamespace(scene=straight_scene, time=brown.time, read=brown.read)
+    np.testing.assert_array_equal(interpolate_result(as_straight, 3), straight)
     curled_scene = jellysim.load_scene(brown.scene, {"tentacles.rest_curvature": 20.0})
     curled = SimpleNamespace(scene=curled_scene, time=brown.time, read=brown.read)
     expected = interpolate_tentacles(

@@ -11,6 +11,7 @@ import numpy as np
 
 from jellysim.bell import BellModel, register
 from jellysim.config.schema import Scene
+from jellysim.tentacle.layout import RootLayout, root_layout
 from jellysim.tentacle.roots import NO_FORCING, Forcing
 
 MARGIN_POINTS_PER_ROOT = 8
@@ -23,7 +24,7 @@ class ForcedRoots(BellModel):
     def __init__(
         self,
         radius: float,
-        count: int,
+        layout: RootLayout,
         amplitude: float,
         frequency: float,
         direction: str | tuple[float, float, float],
@@ -32,8 +33,11 @@ class ForcedRoots(BellModel):
         self.amplitude = amplitude
         self.omega = 2.0 * np.pi * frequency
         self.direction = direction
-        angles = 2.0 * np.pi * np.arange(count) / count
+        angles = layout.angles
+        count = angles.size
         self.base = radius * np.stack([np.cos(angles), np.sin(angles), np.zeros(count)], axis=1)
+        if layout.any_mouth:  # oral arms on their circle, forced like the margin
+            self.base[layout.mouth] *= layout.mouth_radius[layout.mouth, None]
         self.directions = self._directions(angles)
 
     def _directions(self, angles: np.ndarray) -> np.ndarray:
@@ -75,5 +79,5 @@ class ForcedRoots(BellModel):
 def _forced(scene: Scene) -> ForcedRoots:
     rm = scene.root_motion
     return ForcedRoots(
-        scene.bell.radius, scene.tentacles.count, rm.amplitude, rm.frequency, rm.direction
+        scene.bell.radius, root_layout(scene), rm.amplitude, rm.frequency, rm.direction
     )

@@ -17,8 +17,10 @@ Here the hand-keyed curves are replaced by a parametric bell (docs/theory/bell.m
 - Swimming: the bell moves along its axis (+z) at ``u = U (1 + k c'(phase))`` (Eq. B5), with U the
   mean ``swim_speed`` and k set so that the slowest speed, during relaxation, is
   ``(1 - speed_variation) U``: fastest while jetting, coasting while relaxing.
-- Roots: tentacle k at angle ``2 pi k / T`` on the margin; the clamp direction keeps its initial
-  angle (along -z) to the bell wall at the margin as the wall tilts inwards (Eq. B6).
+- Roots: on the margin at the layout's angles (tentacle k at ``2 pi k / T`` in a one-table
+  scene; :mod:`jellysim.tentacle.layout`); the clamp direction keeps its initial angle (along
+  -z) to the bell wall at the margin as the wall tilts inwards (Eq. B6). Mouth roots (oral arms)
+  sit on their circle in the margin plane, carried with the bell, hanging along -z.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from jellysim import fields
 from jellysim.bell import BellModel, register
 from jellysim.config.schema import Scene
 from jellysim.fields import Dataset
+from jellysim.tentacle.layout import RootLayout, root_layout
 from jellysim.tentacle.roots import NO_FORCING, Forcing
 
 MESH_RINGS = 12  # meridian rings of each surface, apex excluded
@@ -134,7 +137,7 @@ class KinematicBell(BellModel):
         elongation: float,
         swim_speed: float,
         speed_variation: float,
-        tentacles: int,
+        layout: RootLayout,
     ) -> None:
         self.radius = radius
         self.height = height
@@ -148,9 +151,11 @@ class KinematicBell(BellModel):
         self.elongation = elongation
         self.swim_speed = swim_speed
         self.speed_gain = speed_variation / fastest_relaxation(waveform, jet_fraction)
-        self.sectors = sector_count(tentacles, lobes)
+        self.sectors = sector_count(layout.margin_sectors(), lobes)
         self.faces = bell_faces(self.sectors)
-        self.root_angles = 2.0 * np.pi * np.arange(tentacles) / tentacles
+        self.root_angles = layout.angles
+        self.mouth = layout.mouth if layout.any_mouth else None
+        self.mouth_radius = radius * layout.mouth_radius
         self.sector_angles = 2.0 * np.pi * np.arange(self.sectors) / self.sectors
         # Outer meridian s from the first ring to the margin, inner from the margin back up.
         outer = np.arange(1, MESH_RINGS + 1) / MESH_RINGS
@@ -225,6 +230,11 @@ class KinematicBell(BellModel):
         d_z = 0.5 * np.pi * self.height * (1.0 + self.elongation * q2)
         turn = np.arctan2(d_rho, d_z) - rest
         directions = np.sin(turn)[..., None] * radial[None] - np.cos(turn)[..., None] * Z_AXIS
+        if self.mouth is not None:  # oral arms: carried with the bell, not with its margin
+            m = self.mouth
+            positions[:, m, :2] = self.mouth_radius[m, None] * radial[m, :2]
+            velocities[:, m, :2] = 0.0
+            directions[:, m] = -Z_AXIS
         return positions, velocities, directions
 
     def forcing(self) -> Forcing:
@@ -331,5 +341,5 @@ def _kinematic(scene: Scene) -> KinematicBell:
         elongation=b.elongation,
         swim_speed=b.swim_speed,
         speed_variation=b.speed_variation,
-        tentacles=scene.tentacles.count,
+        layout=root_layout(scene),
     )

@@ -35,6 +35,12 @@ key takes its default.
   range. Invalid input exits with status 2 and writes nothing.
 - `tentacles.density` left unset means the water density (`water.density`): neutrally buoyant
   tentacles, on which gravity does not act.
+- **Tentacle groups** (docs/groups.md): a jellyfish may carry several groups of tentacles
+  (marginal tentacles, oral arms, ...), each a sub-table `[tentacles.NAME]` that takes every
+  `[tentacles]` key below. Keys written in `[tentacles]` itself are then shared: each group
+  inherits those it does not set. `--set tentacles.NAME.KEY=VALUE` sets a key of one group
+  (`--set tentacles.arms.youngs_modulus=5e6`); `--set` never adds a group. A scene with a plain
+  `[tentacles]` table and no sub-tables has one group, named `tentacles`.
 """
 
 
@@ -67,7 +73,7 @@ def _table(title: str, cls: type, prefix: str) -> list[str]:
         "| --- | --- | --- | --- | --- |",
     ]
     for f in dataclasses.fields(cls):
-        if f.name in SECTIONS and cls is Scene:
+        if (f.name in SECTIONS and cls is Scene) or f.metadata.get("internal"):
             continue
         meta = f.metadata
         cells = (

@@ -18,7 +18,14 @@ from typing import Any
 
 import tomli_w
 
-from jellysim.config.schema import MAX_TURN_PER_SEGMENT, Scene
+from jellysim.config.schema import (
+    DEFAULT_GROUP,
+    GROUP_NAME_PATTERN,
+    MAX_TURN_PER_SEGMENT,
+    Scene,
+    TentacleGroup,
+    Tentacles,
+)
 from jellysim.errors import InputError
 
 Tree = dict[str, Any]
@@ -33,7 +40,8 @@ def suggest(name: str, candidates: Iterable[str]) -> str:
 
 
 def _fields(cls: type) -> dict[str, dataclasses.Field[Any]]:
-    return {f.name: f for f in dataclasses.fields(cls)}
+    """The scene keys of a table (internal fields, filled by the loader, are not keys)."""
+    return {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
 
 
 def _is_section(f: dataclasses.Field[Any]) -> bool:
@@ -76,6 +84,8 @@ def allowed(meta: Mapping[str, Any]) -> str:
         return "a name of letters, digits, '_', '.' and '-'"
     if kind == "bool":
         return "true or false"
+    if kind == "angles":
+        return "a non-empty list of finite numbers in [-360, 360] (degrees)"
     noun = "an integer" if kind == "int" else "a finite number"
     bounds = [
         f"{op} {meta[key]:g}"
@@ -110,6 +120,16 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
         if not isinstance(value, bool):
             raise bad()
         return value
+    if kind == "angles":
+        if (
+            not isinstance(value, (list, tuple))
+            or not value
+            or len(value) > 100_000
+            or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in value)
+            or not all(math.isfinite(c) and -360.0 <= c <= 360.0 for c in value)
+        ):
+            raise bad()
+        return tuple(float(c) for c in value)
     if kind == "color":
         if isinstance(value, str) and re.fullmatch(r"#[0-9A-Fa-f]{6}", value):
             return tuple(int(value[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
@@ -194,36 +214,80 @@ def _unknown_key(table: str, key: str, fields: Iterable[str]) -> InputError:
 
 def scene_from_tree(tree: Mapping[str, Any]) -> Scene:
     """Validate a nested mapping (as read from TOML) and build the scene."""
+    table = tree.get("tentacles")
+    named: dict[str, Mapping[str, Any]] = {}
+    if isinstance(table, Mapping):
+        named = {k: v for k, v in table.items() if isinstance(v, Mapping)}
+        if named:
+            tree = {**tree, "tentacles": {k: v for k, v in table.items() if k not in named}}
     scene = _build(Scene, tree, "")
+    if named:
+        # The shared keys only fill the groups in; the first group stands as [tentacles] for
+        # code that reads one table (docs/groups.md).
+        groups = _build_groups(tree["tentacles"], named)
+        scene = dataclasses.replace(scene, tentacles=groups[0].tentacles, tentacle_groups=groups)
     _check_consistency(scene)
     return scene
 
 
+def _build_groups(
+    shared: Mapping[str, Any], named: Mapping[str, Mapping[str, Any]]
+) -> tuple[TentacleGroup, ...]:
+    """The named groups ``[tentacles.NAME]``: each group's keys over the shared ones."""
+    keys = _fields(Tentacles)
+    groups = []
+    for name, own in named.items():
+        if name in keys:
+            raise InputError(
+                f"tentacles.{name} is a key of [tentacles], not a group: write "
+                f"{name} = VALUE, or name the group otherwise"
+            )
+        if not re.fullmatch(GROUP_NAME_PATTERN, name):
+            raise InputError(
+                f"tentacles.{name}: {quote(name)} is not a group name: letters, digits, '_' "
+                "and '-', starting with a letter"
+            )
+        for key, value in own.items():
+            if isinstance(value, Mapping):
+                raise InputError(
+                    f"tentacles.{name}.{key}: groups do not nest; give [tentacles.{name}] "
+                    f"its keys ({', '.join(keys)})"
+                )
+        table = _build(Tentacles, {**shared, **own}, f"tentacles.{name}.")
+        groups.append(TentacleGroup(name, table))
+    return tuple(groups)
+
+
 def _check_consistency(scene: Scene) -> None:
     """Rules that involve more than one key."""
-    t = scene.tentacles
-    if t.count * t.particles > 5_000_000:
-        raise InputError(
-            f"tentacles.count * tentacles.particles = {t.count * t.particles} is too large: "
-            "at most 5,000,000 simulated particles"
+    if scene.particle_count > 5_000_000:
+        what = (
+            "tentacles.count * tentacles.particles"
+            if not scene.tentacle_groups
+            else "count x particles over the tentacle groups"
         )
-    _check_rest_shape(scene)
+        raise InputError(
+            f"{what} = {scene.particle_count} is too large: at most 5,000,000 simulated particles"
+        )
+    for group in scene.groups:
+        _check_rest_shape(group)
+        _check_layout(scene, group)
     if scene.bell.model != "none" and scene.root_motion.amplitude > 0.0:
         raise InputError(
             f"root_motion.amplitude = {_show(scene.root_motion.amplitude)} forces the roots, which "
             f"only bell.model = 'none' does; with bell.model = {quote(scene.bell.model)} the bell "
             "moves them: set root_motion.amplitude = 0"
         )
-    if scene.fluid.model == "none" and scene.tentacles.count == 0:
+    if scene.fluid.model == "none" and scene.tentacle_count == 0:
         raise InputError(
             "tentacles.count = 0 is not allowed: expected an integer >= 1 (0 only in fluid-only "
             "scenes, fluid.model = 'mps')"
         )
     soft = scene.bell.model == "mass-spring"
-    if scene.fluid.model == "mps" and scene.tentacles.count > 0 and not soft:
+    if scene.fluid.model == "mps" and scene.tentacle_count > 0 and not soft:
         raise InputError(
             f"fluid.model = 'mps' without a bell runs fluid-only scenes: set tentacles.count = 0 "
-            f"(it is {scene.tentacles.count}); tentacles in the fluid come with "
+            f"(it is {scene.tentacle_count}); tentacles in the fluid come with "
             "bell.model = 'mass-spring'"
         )
     if soft:
@@ -243,18 +307,59 @@ def _check_consistency(scene: Scene) -> None:
         )
 
 
-def _check_rest_shape(scene: Scene) -> None:
+def group_key(group: TentacleGroup, key: str) -> str:
+    """The dotted scene key of ``key`` in ``group``: ``tentacles.KEY`` for the one-table
+    scene's group, ``tentacles.NAME.KEY`` for a named one."""
+    return f"tentacles.{key}" if group.name == DEFAULT_GROUP else f"tentacles.{group.name}.{key}"
+
+
+def _check_rest_shape(group: TentacleGroup) -> None:
     """A rest curl the discrete chain can draw: at most 0.5 rad of turning per segment, about
     12.6 segments or more per turn of the coil (docs/theory/tentacle.md §6)."""
-    t = scene.tentacles
+    t = group.tentacles
     limit = MAX_TURN_PER_SEGMENT
     for key in ("rest_curvature", "rest_curvature_tip", "rest_torsion"):
         value = getattr(t, key)
         if value is not None and abs(value) * t.spacing > limit:
             raise InputError(
-                f"tentacles.{key} = {_show(value)} is too tight for tentacles.spacing = "
-                f"{_show(t.spacing)}: |{key}| x spacing must be at most {limit:g} "
+                f"{group_key(group, key)} = {_show(value)} is too tight for "
+                f"{group_key(group, 'spacing')} = {_show(t.spacing)}: |{key}| x spacing "
+                f"must be at most {limit:g} "
                 f"(|{key}| <= {limit / t.spacing:.6g} 1/m), or refine the spacing"
+            )
+
+
+def _check_layout(scene: Scene, group: TentacleGroup) -> None:
+    """A group's roots exist and fit where they are placed (docs/groups.md)."""
+    t = group.tentacles
+    if group.name != DEFAULT_GROUP and t.count < 1:
+        raise InputError(
+            f"{group_key(group, 'count')} = {t.count} gives the group no roots: expected an "
+            f"integer >= 1 (leave the group out of the scene to have none)"
+        )
+    if t.angles is not None and len(t.angles) != t.count:
+        raise InputError(
+            f"{group_key(group, 'angles')} gives {len(t.angles)} angles for "
+            f"{group_key(group, 'count')} = {t.count}: give one angle per tentacle"
+        )
+    if t.arrangement == "clusters" and t.angles is None:
+        clusters = 8 if t.clusters is None else t.clusters
+        if clusters > t.count:
+            raise InputError(
+                f"{group_key(group, 'clusters')} = {clusters} is more than "
+                f"{group_key(group, 'count')} = {t.count}: every cluster needs a root"
+            )
+    if t.placement == "mouth":
+        b = scene.bell
+        fraction = 0.15 if t.mouth_radius is None else t.mouth_radius
+        # The arms' circle plus one arm diameter must stay inside the margin at its most
+        # contracted and in its deepest notch (the kinematic bell's Eq. B2-B4).
+        room = b.radius * (1.0 - b.contraction) * (1.0 - (b.lobe_depth if b.lobes else 0.0))
+        if fraction * b.radius + t.spacing >= room:
+            raise InputError(
+                f"{group_key(group, 'mouth_radius')} = {_show(fraction)}: the arms do not fit "
+                f"under the bell: mouth_radius x bell.radius + spacing must be less than "
+                f"{room:.4g} m (the margin's radius at full contraction, in a notch)"
             )
 
 
@@ -411,14 +516,24 @@ def parse_override(item: str) -> tuple[str, Any]:
 
 def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tree:
     """Return a copy of ``tree`` with dotted-key overrides applied; unknown keys are errors."""
+    _shadowed_overrides(tree, overrides)
     result = _deep_copy(tree)
     for dotted, value in overrides.items():
         parts = dotted.split(".")
         cls: type = Scene
         node = result
+        in_group = False
         for depth, part in enumerate(parts):
             fields = _fields(cls)
             prefix = ".".join(parts[:depth])
+            if cls is Tentacles and not in_group and depth < len(parts) - 1:
+                # tentacles.GROUP.KEY reaches a key of a named group; --set never makes one.
+                groups = [k for k, v in node.items() if isinstance(v, Mapping)]
+                if part not in groups:
+                    raise _unknown_group(dotted, part, groups)
+                node = node[part]
+                in_group = True
+                continue
             if part not in fields:
                 raise _unknown_key(prefix, part, fields)
             f = fields[part]
@@ -438,6 +553,35 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
     return result
 
 
+def _unknown_group(dotted: str, name: str, groups: list[str]) -> InputError:
+    """The error for ``--set tentacles.NAME.KEY`` where the scene has no group NAME."""
+    if not groups:
+        return InputError(
+            f"--set {dotted}: the scene has no tentacle group {quote(name)} (it has one "
+            "[tentacles] table; set tentacles.KEY)"
+        )
+    return InputError(
+        f"--set {dotted}: unknown tentacle group {quote(name)}{suggest(name, groups)}; the "
+        f"scene's groups: {', '.join(groups)}"
+    )
+
+
+def _shadowed_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> None:
+    """A shared ``tentacles.KEY`` that every named group sets itself would change nothing."""
+    table = tree.get("tentacles")
+    if not isinstance(table, Mapping):
+        return
+    groups = {k: v for k, v in table.items() if isinstance(v, Mapping)}
+    for dotted in overrides:
+        parts = dotted.split(".")
+        if len(parts) == 2 and parts[0] == "tentacles" and groups:
+            if all(parts[1] in own for own in groups.values()):
+                raise InputError(
+                    f"--set {dotted} changes nothing: every tentacle group sets {parts[1]} "
+                    f"itself; set tentacles.GROUP.{parts[1]} (groups: {', '.join(groups)})"
+                )
+
+
 def _deep_copy(tree: Mapping[str, Any]) -> Tree:
     return {k: _deep_copy(v) if isinstance(v, Mapping) else v for k, v in tree.items()}
 
@@ -450,7 +594,7 @@ def scene_to_tree(scene: Scene) -> Tree:
             out = {}
             for f in dataclasses.fields(obj):
                 value = getattr(obj, f.name)
-                if value is None:
+                if value is None or f.metadata.get("internal"):
                     continue  # TOML has no null; an unset optional key stays unset
                 out[f.name] = convert(value)
             return out
@@ -459,6 +603,8 @@ def scene_to_tree(scene: Scene) -> Tree:
         return obj
 
     tree: Tree = convert(scene)
+    if scene.tentacle_groups:  # [tentacles.NAME] each, every key explicit
+        tree["tentacles"] = {g.name: convert(g.tentacles) for g in scene.tentacle_groups}
     return tree
 
 

@@ -147,6 +147,138 @@ class Tentacles:
         "rising 2 pi tau/(k^2 + tau^2) per turn, k the rest curvature); |rest_torsion| x "
         "spacing at most 0.5",
     )
+    # Where a group's roots sit (docs/groups.md). Unset keys keep the one-table scene's layout:
+    # every root on the margin, evenly spaced, the first at angle 0.
+    placement: str | None = param(
+        None,
+        kind="choice",
+        choices=("margin", "mouth"),
+        nullable=True,
+        doc="where the roots sit: on the bell 'margin' (unset), or around the 'mouth' under "
+        "the bell, on a circle of mouth_radius in the margin plane (oral arms)",
+    )
+    arrangement: str | None = param(
+        None,
+        kind="choice",
+        choices=("even", "clusters"),
+        nullable=True,
+        doc="roots 'even'ly spaced around the circle (unset), or in 'clusters' (like Cyanea's "
+        "eight); ignored where angles are given",
+    )
+    clusters: int | None = param(
+        None,
+        kind="int",
+        ge=1,
+        le=1000,
+        nullable=True,
+        doc="number of clusters (arrangement = 'clusters'; unset: 8), evenly spaced, the "
+        "count shared among them as evenly as it divides",
+    )
+    cluster_spread: float | None = param(
+        None,
+        unit="deg",
+        gt=0.0,
+        le=360.0,
+        nullable=True,
+        doc="angle one cluster's roots span (arrangement = 'clusters'; unset: half the gap "
+        "between cluster centres)",
+    )
+    angles: tuple[float, ...] | None = param(
+        None,
+        unit="deg",
+        kind="angles",
+        nullable=True,
+        doc="the roots' angles about the bell axis, from +x towards +y, one per tentacle "
+        "(count = their number); overrides arrangement",
+    )
+    angle_offset: float | None = param(
+        None,
+        unit="deg",
+        ge=-360.0,
+        le=360.0,
+        nullable=True,
+        doc="turns the whole arrangement about the bell axis (unset: 0, the first root or "
+        "cluster at +x)",
+    )
+    mouth_radius: float | None = param(
+        None,
+        gt=0.0,
+        lt=1.0,
+        nullable=True,
+        doc="placement = 'mouth': radius of the roots' circle as a fraction of bell.radius "
+        "(unset: 0.15)",
+    )
+    # How a group is drawn (render time; [look] gives the defaults).
+    form: str | None = param(
+        None,
+        kind="choice",
+        choices=("thread", "ribbon"),
+        nullable=True,
+        doc="drawn as a tapered 'thread' (unset) or a frilled 'ribbon' with a ruffled edge "
+        "(oral arms)",
+    )
+    color: tuple[float, float, float] | None = param(
+        None,
+        kind="color",
+        nullable=True,
+        doc="colour of this group (linear RGB; unset: look.tentacle_color)",
+    )
+    drawn_radius: float | None = param(
+        None,
+        unit="m",
+        gt=0.0,
+        le=10.0,
+        nullable=True,
+        doc="drawn radius of a thread at its root (unset: look.tentacle_radius)",
+    )
+    taper: float | None = param(
+        None,
+        gt=0.0,
+        le=1.0,
+        nullable=True,
+        doc="drawn radius (thread) or width (ribbon) at the tip as a fraction of the root's "
+        "(unset: look.tentacle_taper)",
+    )
+    ribbon_width: float | None = param(
+        None,
+        unit="m",
+        gt=0.0,
+        le=10.0,
+        nullable=True,
+        doc="form = 'ribbon': width of the ribbon at the root (unset: 4 x spacing)",
+    )
+    ruffles: float | None = param(
+        None,
+        unit="1/m",
+        ge=0.0,
+        le=1.0e4,
+        nullable=True,
+        doc="form = 'ribbon': waves of the ruffled edge per metre of arm (unset: 1 / (2 x "
+        "ribbon_width))",
+    )
+    ruffle_depth: float | None = param(
+        None,
+        ge=0.0,
+        le=2.0,
+        nullable=True,
+        doc="form = 'ribbon': amplitude of the edge's waves as a fraction of the width "
+        "(unset: 0.3; 0: a flat ribbon)",
+    )
+
+
+# Named groups: any name of letters, digits, '_' and '-' that is not a [tentacles] key.
+GROUP_NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_-]*$"
+# The group of a scene with one [tentacles] table and no named groups.
+DEFAULT_GROUP = "tentacles"
+
+
+@dataclass(frozen=True)
+class TentacleGroup:
+    """A named group of identical tentacles: ``tentacles`` holds its keys with the shared
+    ``[tentacles]`` keys filled in where the group leaves them out."""
+
+    name: str
+    tentacles: Tentacles
 
 
 @dataclass(frozen=True)
@@ -506,6 +638,9 @@ class Scene:
     fluid: Fluid = field(default_factory=Fluid)
     look: Look = field(default_factory=Look)
     solver: Solver = field(default_factory=Solver)
+    # The named groups [tentacles.NAME], in the scene's order; none: [tentacles] is the one group.
+    # Not a TOML key of its own (the loader fills it from the sub-tables of [tentacles]).
+    tentacle_groups: tuple[TentacleGroup, ...] = field(default=(), metadata={"internal": True})
 
     @property
     def frame_count(self) -> int:
@@ -517,6 +652,34 @@ class Scene:
         """Density of the tentacles, the water's when unset (neutral buoyancy)."""
         d = self.tentacles.density
         return self.water.density if d is None else d
+
+    @property
+    def groups(self) -> tuple[TentacleGroup, ...]:
+        """Every group of tentacles, in order: the named groups, or ``[tentacles]`` alone."""
+        return self.tentacle_groups or (TentacleGroup(DEFAULT_GROUP, self.tentacles),)
+
+    @property
+    def tentacle_count(self) -> int:
+        """Simulated tentacles over all groups."""
+        return sum(g.tentacles.count for g in self.groups)
+
+    @property
+    def particle_count(self) -> int:
+        """Simulated tentacle particles over all groups."""
+        return sum(g.tentacles.count * g.tentacles.particles for g in self.groups)
+
+    @property
+    def max_particles(self) -> int:
+        """The most particles of any group's tentacles (P of the result's tentacle arrays)."""
+        return max((g.tentacles.particles for g in self.groups if g.tentacles.count), default=0)
+
+    def group_scene(self, index: int) -> Scene:
+        """The scene as group ``index`` alone sees it: its keys as the ``[tentacles]`` table."""
+        if not self.tentacle_groups:
+            return self
+        return dataclasses.replace(
+            self, tentacles=self.tentacle_groups[index].tentacles, tentacle_groups=()
+        )
 
 
 SECTIONS: dict[str, type] = {

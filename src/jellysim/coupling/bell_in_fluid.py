@@ -25,6 +25,7 @@ from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
 from jellysim.fluid.mps import MPSParameters, MPSSolver
 from jellysim.fluid.setup import fluid_particles, mps_parameters
+from jellysim.tentacle.layout import root_layout
 
 # kappa of the fluid's acceleration limit under gravity, dt <= kappa sqrt(l0 / g): gravity moves a
 # particle at rest g dt^2 / 2 = kappa^2 l0 / 2 = 0.0006 l0 in a step. Measured (docs/soft-bell.md):
@@ -75,10 +76,11 @@ class BellInFluid:
         self.solver = MPSSolver(params, positions[order], kinds[order])
         l0 = params.l0
         self.body = SoftBell(scene, shape, rest)
-        sectors = sector_count(max(scene.tentacles.count, 1), 0)
+        layout = root_layout(scene)
+        sectors = sector_count(layout.margin_sectors(), 0)
         self.skin = BellSkin(shape, rest, sectors, l0)
         self.margin = RecordedMargin(
-            shape, rest, l0, sectors, scene.tentacles.count, 1.0 / scene.fps, self.body.forcing()
+            shape, rest, l0, sectors, layout, 1.0 / scene.fps, self.body.forcing()
         )
         # the springs' explicit limit, unless they are integrated implicitly
         self.spring_dt = self.body.stable_dt() if self.body.integration == "explicit" else math.inf

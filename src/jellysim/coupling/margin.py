@@ -18,6 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from jellysim.bell.soft import BellShape
+from jellysim.tentacle.layout import RootLayout
 from jellysim.tentacle.roots import Forcing
 
 MARGIN_SMOOTHING = 1.5  # l0: standard deviation of the Gaussian along the margin arc
@@ -36,9 +37,12 @@ class Record(NamedTuple):
 
 class RecordedMargin:
     """The margin of a bell of ``shape`` whose particles rest at ``rest`` (B, 3) m on a lattice of
-    spacing ``l0`` (m), sampled at ``sectors`` angles; every ``sectors // tentacles``-th sample
-    is a tentacle root. Frames are ``frame_dt`` (s) apart; ``forcing`` is the bell's (the scales
-    of its pulse, for the tentacles' substep)."""
+    spacing ``l0`` (m), sampled at ``sectors`` angles. The roots follow ``layout``: in a
+    one-table scene every ``sectors // tentacles``-th sample is a root; otherwise a margin root
+    is interpolated linearly in angle between the two samples about it, and a mouth root (oral
+    arms) sits on its circle about the margin's centre in the margin plane, moving with the
+    margin's mean velocity and hanging along -z. Frames are ``frame_dt`` (s) apart;
+    ``forcing`` is the bell's (the scales of its pulse, for the tentacles' substep)."""
 
     def __init__(
         self,
@@ -46,14 +50,16 @@ class RecordedMargin:
         rest: np.ndarray,
         l0: float,
         sectors: int,
-        tentacles: int,
+        layout: RootLayout,
         frame_dt: float,
         forcing: Forcing,
     ) -> None:
         self.sectors = sectors
         self.sample_angles = 2.0 * np.pi * np.arange(sectors) / sectors
+        self.layout = layout
+        tentacles = layout.count
         self.tentacles = tentacles
-        self.root_every = sectors // tentacles if tentacles else 0
+        self.root_every = sectors // tentacles if tentacles and layout.default else 0
         self.frame_dt = frame_dt
         self._forcing = forcing
         rho, height, angle = shape.cylindrical(rest)
@@ -103,16 +109,48 @@ class RecordedMargin:
         radial /= np.linalg.norm(radial, axis=1)[:, None]
         directions = np.sin(turn)[:, None] * radial
         directions[:, 2] -= np.cos(turn)
-        take = slice(0, None, self.root_every) if self.tentacles else slice(0, 0)
+        if self.root_every or not self.tentacles:
+            take = slice(0, None, self.root_every) if self.tentacles else slice(0, 0)
+            roots, root_velocities = margin[take], margin_velocity[take]
+            root_directions = directions[take]
+        else:
+            roots, root_velocities, root_directions = self._placed(
+                margin, margin_velocity, directions
+            )
         self.records[frame] = Record(
-            margin[take],
-            margin_velocity[take],
-            directions[take],
+            roots,
+            root_velocities,
+            root_directions,
             margin,
             velocities.mean(axis=0),
         )
         for old in [k for k in self.records if k < frame - 1]:
             del self.records[old]
+
+    def _placed(
+        self, margin: np.ndarray, velocity: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Roots, their velocities and clamp directions (T, 3) at the layout's places."""
+        layout = self.layout
+        step = 2.0 * np.pi / self.sectors
+        x = np.mod(layout.angles, 2.0 * np.pi) / step
+        j = np.floor(x).astype(np.int64) % self.sectors
+        w = (x - np.floor(x))[:, None]
+        k = (j + 1) % self.sectors
+        roots = (1.0 - w) * margin[j] + w * margin[k]
+        root_velocities = (1.0 - w) * velocity[j] + w * velocity[k]
+        d = (1.0 - w) * directions[j] + w * directions[k]
+        root_directions = d / np.linalg.norm(d, axis=1)[:, None]
+        m = layout.mouth
+        if np.any(m):
+            centre = margin.mean(axis=0)
+            radial = np.stack([np.cos(layout.angles[m]), np.sin(layout.angles[m])], axis=1)
+            rest_radius = _ring_radius(self.rest_margin)
+            roots[m] = centre
+            roots[m, :2] += (layout.mouth_radius[m] * rest_radius)[:, None] * radial
+            root_velocities[m] = velocity.mean(axis=0)
+            root_directions[m] = (0.0, 0.0, -1.0)
+        return roots, root_velocities, root_directions
 
     def restart(self, frame: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """Forget every record and record ``frame`` afresh (a resume from a checkpoint)."""

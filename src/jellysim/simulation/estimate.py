@@ -63,6 +63,7 @@ from jellysim.io.result import BATCH_FRAMES, BATCH_SECONDS, chunk_rows, frame_by
 from jellysim.simulation.fluid import fluid_datasets
 from jellysim.simulation.loop import loop_name
 from jellysim.tentacle.kernels import KKT_BLOCK, KKT_HALF_BANDWIDTH
+from jellysim.tentacle.layout import root_layout
 from jellysim.tentacle.model import SubstepPlan, plan_substeps
 from jellysim.tentacle.roots import Forcing
 
@@ -308,18 +309,31 @@ def _spring_stiffness_sum(scene: Scene, params: MPSParameters) -> float:
     return b.spring_stiffness * springs * stiffened
 
 
-def _tentacle_plan(scene: Scene) -> tuple[SubstepPlan | None, int]:
-    """The tentacles' substep plan (None without tentacles) and their margin's points."""
-    if scene.tentacles.count == 0:
-        return None, 0
+def _tentacle_plans(scene: Scene) -> tuple[list[SubstepPlan], int]:
+    """Each tentacle group's substep plan (none without tentacles) and their margin's points."""
+    if scene.tentacle_count == 0:
+        return [], 0
     if loop_name(scene) == "soft-bell":
         forcing: Forcing = margin_forcing(scene)
-        margin_points = sector_count(max(scene.tentacles.count, 1), 0)
+        margin_points = sector_count(root_layout(scene).margin_sectors(), 0)
     else:
         driver = make_root_driver(scene)
         forcing = driver.forcing()
         margin_points = driver.margin(0.0).shape[0]
-    return plan_substeps(scene, forcing), margin_points
+    plans = [plan_substeps(scene.group_scene(g), forcing) for g in range(len(scene.groups))]
+    return plans, margin_points
+
+
+def _tentacle_datasets(scene: Scene, margin_points: int) -> list[Dataset]:
+    """The tentacles' per-frame datasets: T over every group, P the longest chain's."""
+    particles = scene.tentacles.particles if len(scene.groups) == 1 else scene.max_particles
+    return frame_datasets(scene.tentacle_count, particles, margin_points)
+
+
+def _tentacle_static(scene: Scene) -> dict[str, int]:
+    """Bytes of the static per-tentacle datasets: group and particle count, int32 each."""
+    count = scene.tentacle_count
+    return {fields.TENTACLE_GROUP.path: 4 * count, fields.TENTACLE_PARTICLES.path: 4 * count}
 
 
 # ----------------------------------------------------------------------------------- datasets
@@ -329,21 +343,20 @@ def planned_datasets(scene: Scene) -> tuple[list[Dataset], dict[str, int]]:
     """The per-frame datasets the scene's loop will declare (their shapes from the estimated
     counts) and the bytes of its static ones, by path; tests/unit/test_estimate.py holds them
     to the loops' own."""
-    t = scene.tentacles
     name = loop_name(scene)
     if name == "tentacles":
         driver = make_root_driver(scene)
-        own = frame_datasets(t.count, t.particles, driver.margin(0.0).shape[0])
+        own = _tentacle_datasets(scene, driver.margin(0.0).shape[0])
         static = {path: array.nbytes for path, (array, _) in driver.static_datasets().items()}
-        return own + driver.frame_datasets(), static
+        return own + driver.frame_datasets(), _tentacle_static(scene) | static
     counts = particle_counts(scene)
     if name == "fluid":
         return [fields.TIME.dataset(), *fluid_datasets(counts.total, counts.dim)], {
             fields.FLUID_KIND.path: counts.total
         }
-    sectors = sector_count(max(t.count, 1), 0)
-    if t.count > 0:
-        own = frame_datasets(t.count, t.particles, sectors)
+    sectors = sector_count(root_layout(scene).margin_sectors(), 0)
+    if scene.tentacle_count > 0:
+        own = _tentacle_datasets(scene, sectors)
     else:
         own = [fields.TIME.dataset(), fields.BELL_MARGIN.dataset(R=sectors)]
     bell = counts.bell
@@ -366,6 +379,8 @@ def planned_datasets(scene: Scene) -> tuple[list[Dataset], dict[str, int]]:
         fields.BELL_MUSCLE.path: springs,
         fields.BELL_REST_POSITION.path: bell * 3 * FLOAT,
     }
+    if scene.tentacle_count > 0:
+        static |= _tentacle_static(scene)
     return datasets, static
 
 
@@ -449,7 +464,7 @@ def _fluid_checkpoint(params: MPSParameters, counts: Particles) -> int:
 def _bell_memory(scene: Scene, counts: Particles) -> dict[str, int]:
     """The soft bell's springs (pairs, rest lengths, adjacency, tensions) and skin weights."""
     springs = _spring_count(scene, counts.bell)
-    vertices = 2 + (2 * MESH_RINGS - 1) * sector_count(max(scene.tentacles.count, 1), 0)
+    vertices = 2 + (2 * MESH_RINGS - 1) * sector_count(root_layout(scene).margin_sectors(), 0)
     skin = vertices * lattice_reference(3, 1.0, SKIN_RADIUS, "square").count * 3 * FLOAT
     return {"bell springs and skin": springs * 12 * FLOAT + counts.bell * 20 * FLOAT + skin}
 
@@ -486,7 +501,7 @@ def estimate(scene: Scene) -> Costs:
 
     Raises InputError when the fluid or the tentacles would need more substeps a frame than
     their caps allow."""
-    tentacle_plan, _ = _tentacle_plan(scene)
+    tentacle_plans, _ = _tentacle_plans(scene)
     frames = scene.frame_count
     memory: dict[str, int] = {}
     checkpoint = 0
@@ -504,17 +519,22 @@ def estimate(scene: Scene) -> Costs:
             f"{fluid.steps} MPS steps a frame of {counts.total:,} particles "
             f"({counts.fluid:,} fluid)"
         )
-    if tentacle_plan is not None:
-        t = scene.tentacles
-        memory["tentacles"] = _tentacle_memory(scene, tentacle_plan)
-        checkpoint += 2 * t.count * t.particles * 3 * FLOAT
-        frame_seconds += (
-            tentacle_plan.substeps * t.count * t.particles * TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP
-        )
-        plan.append(
-            f"{tentacle_plan.substeps} substeps a frame of {t.count:,} x {t.particles:,} "
-            "tentacle particles"
-        )
+    if tentacle_plans:
+        memory["tentacles"] = 0
+        for index, (group, group_plan) in enumerate(zip(scene.groups, tentacle_plans, strict=True)):
+            t = group.tentacles
+            memory["tentacles"] += _tentacle_memory(scene.group_scene(index), group_plan)
+            frame_seconds += (
+                group_plan.substeps * t.count * t.particles * TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP
+            )
+            text = (
+                f"{group_plan.substeps} substeps a frame of {t.count:,} x {t.particles:,} "
+                "tentacle particles"
+            )
+            plan.append(text if len(scene.groups) == 1 else f"{group.name}: {text}")
+        # the checkpoint holds every tentacle padded to the longest chain
+        particles = scene.tentacles.particles if len(scene.groups) == 1 else scene.max_particles
+        checkpoint += 2 * scene.tentacle_count * particles * 3 * FLOAT
     datasets, static = planned_datasets(scene)
     memory["result buffers"] = _writer_memory(datasets, frames, frame_seconds)
     memory["run overhead"] = RUN_OVERHEAD_BYTES

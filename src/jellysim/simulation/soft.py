@@ -35,7 +35,7 @@ class SoftBellSimulation(Simulation):
         super().__init__(scene)
         self.coupling = BellInFluid(scene)
         self.tentacles = (
-            TentacleSimulation(scene, self.coupling.margin) if scene.tentacles.count > 0 else None
+            TentacleSimulation(scene, self.coupling.margin) if scene.tentacle_count > 0 else None
         )
 
     def describe(self) -> str:
@@ -116,6 +116,7 @@ class SoftBellSimulation(Simulation):
             fields.FLUID_KIND.path: (c.solver.kind[c.fluid_rows], fields.FLUID_KIND.units),
             **c.skin.static_datasets(),
             **c.body.static_datasets(),
+            **(self.tentacles.static_datasets() if self.tentacles is not None else {}),
         }
 
     def attributes(self, scene_toml: str) -> dict[str, Any]:
@@ -134,6 +135,7 @@ class SoftBellSimulation(Simulation):
         if self.tentacles is not None:
             attributes["tentacle_dt"] = self.tentacles.plan.dt
             attributes["tentacle_substeps"] = self.tentacles.plan.substeps
+            attributes["tentacle_groups"] = list(self.tentacles.layout.names)
         return attributes
 
     def checkpoint_state(self) -> dict[str, np.ndarray]:
