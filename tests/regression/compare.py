@@ -37,7 +37,10 @@ def read_all(path: Path) -> dict[str, np.ndarray]:
         f.visititems(visit)
         for key, value in f.attrs.items():
             if key not in IGNORED_ATTRIBUTES:
-                values[f"attr:{key}"] = np.asarray(value)
+                array = np.asarray(value)
+                if array.dtype == object:  # a list of names (tentacle_groups): stored as text
+                    array = array.astype(str)
+                values[f"attr:{key}"] = array
     return values
 
 

@@ -17,12 +17,14 @@ j = 0..N-1 at fraction ``t = j / N`` gets (docs/theory/interpolation.md):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
 from jellysim import fields
-from jellysim.config.schema import Scene
+from jellysim.config.schema import Scene, Tentacles
+from jellysim.tentacle.layout import DEFAULT_CLUSTERS, root_layout
 from jellysim.tentacle.model import curl_normals, rest_shape_for
 
 
@@ -241,8 +243,13 @@ def interpolate_tentacles(
     lag_spread: float = 0.0,
     first: int = 0,
     shape_space: str = "positions",
+    closed: bool = True,
 ) -> np.ndarray:
     """Drawn tentacles (F - first, T * factor, P, 3) from simulated ones (F, T, P, 3).
+
+    ``closed`` (default): the roots go round the bell, the last blending into the first. An open
+    row of roots (one cluster of a group, ``closed=False``) draws (T - 1) * factor + 1
+    tentacles, none after the last simulated one.
 
     ``margin`` (F, R, 3) is the margin polyline per frame, ``times`` (F,) the frame times (s),
     ``axis`` the bell axis (default +z, or (F, 3) per frame), ``spacing`` d (m), ``lag_spread``
@@ -265,12 +272,12 @@ def interpolate_tentacles(
         np.array([0.0, 0.0, 1.0]) if axis is None else np.asarray(axis, dtype=np.float64),
         (n_frames, 3),
     )
-    drawn = count * factor
+    drawn = count * factor if closed else (count - 1) * factor + 1
     t = (np.arange(drawn) % factor) / factor
     weight = cosine_weight(t)
     left = np.arange(drawn) // factor
     right = (left + 1) % count
-    lags = interpolation_lags(count, factor, lag_spread)
+    lags = interpolation_lags(count, factor, lag_spread)[:drawn]
 
     # Shapes in each simulated root's local frame, per frame: (F, T, P, 3).
     centres = margin.mean(axis=1)
@@ -348,22 +355,62 @@ class TentacleFrames(Protocol):
     def read(self, field: fields.Field, frames: Any = None) -> np.ndarray: ...
 
 
-def interpolate_result(
+@dataclass(frozen=True)
+class DrawnGroup:
+    """One group's drawn tentacles: ``positions`` (F, D, P, 3) m, D drawn of P particles (the
+    group's own), ``simulated`` the group's rows among the simulated tentacles, ``tentacles``
+    the group's keys (its look: form, color, drawn_radius, taper, ribbon_width, ruffles,
+    ruffle_depth), ``index`` its number in the result's ``tentacle_groups``."""
+
+    name: str
+    index: int
+    tentacles: Tentacles
+    positions: np.ndarray
+    simulated: slice
+
+
+MOUTH_CIRCLE_POINTS = 96  # vertices of the polygon the mouth roots' interpolation follows
+
+
+def _mouth_circle(margin: np.ndarray, roots: np.ndarray) -> np.ndarray:
+    """(F, R, 3): the circle through a mouth group's roots (F, T, 3), about the margin's centre
+    in the plane perpendicular to z, on which the drawn roots are placed."""
+    centre = margin.mean(axis=1)  # (F, 3)
+    rel = roots - centre[:, None]
+    radius = np.linalg.norm(rel[..., :2], axis=2).mean(axis=1)  # (F,)
+    height = rel[..., 2].mean(axis=1)
+    a = 2.0 * np.pi * np.arange(MOUTH_CIRCLE_POINTS) / MOUTH_CIRCLE_POINTS
+    ring = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)  # (R, 3)
+    out = centre[:, None] + radius[:, None, None] * ring[None]
+    out[..., 2] += height[:, None]
+    return out
+
+
+def _clusters(t: Tentacles) -> list[int]:
+    """Sizes of a group's clusters of roots (one closed ring unless arranged in clusters)."""
+    if t.arrangement != "clusters" or t.angles is not None:
+        return [t.count]
+    c = DEFAULT_CLUSTERS if t.clusters is None else t.clusters
+    sizes = [t.count // c + (1 if j < t.count % c else 0) for j in range(c)]
+    return [m for m in sizes if m > 0]
+
+
+def interpolate_groups(
     result: TentacleFrames,
     factor: int | None = None,
     lag: float | None = None,
     frames: tuple[int, int] | None = None,
-) -> np.ndarray:
-    """Drawn tentacles (F, T * factor, P, 3) of an open result.
+) -> list[DrawnGroup]:
+    """Drawn tentacles of an open result, group by group (docs/groups.md).
 
-    ``factor`` defaults to the scene's ``tentacles.interpolation``; ``lag`` (s) to a quarter of
-    the pulse period (0 turns the anti-banding lag off). ``frames`` = (start, stop) gives only
-    those frames, (stop - start, T * factor, P, 3), equal to the slice of the whole: it reads
-    the frames from ``lag`` before ``start`` on, which the lagged shapes need, and no others,
-    and draws only the frames asked for.
+    Each group is interpolated on its own, never blended with another: with its own
+    ``interpolation`` (``factor`` overrides every group's), its own particle count, its roots'
+    ring (the margin, or for oral arms the circle through their roots), and in clusters each
+    cluster as an open row (no tentacles drawn in the gaps between clusters). ``lag`` and
+    ``frames`` as :func:`interpolate_result`.
     """
     scene = result.scene
-    factor = scene.tentacles.interpolation if factor is None else factor
+    groups = scene.groups
     lag = LAG_FRACTION_OF_PULSE * pulse_period(scene) if lag is None else lag
     times = result.time
     start, stop = (0, times.shape[0]) if frames is None else frames
@@ -372,14 +419,76 @@ def interpolate_result(
     # The earliest frame a lagged shape of frame `start` reads (interpolate_tentacles holds the
     # shapes at the first frame before that, so the window must begin at or before it).
     first = max(0, int(np.searchsorted(times, times[start] - max(lag, 0.0), side="right")) - 1)
-    curled = bool(np.any(rest_shape_for(scene) != 0.0))
-    return interpolate_tentacles(
-        result.read(fields.TENTACLE_POSITION, slice(first, stop)),
-        result.read(fields.BELL_MARGIN, slice(first, stop)),
-        times[first:stop],
-        factor,
-        scene.tentacles.spacing,
-        lag_spread=lag,
-        first=start - first,
-        shape_space="curvatures" if curled else "positions",
-    )
+    window = slice(first, stop)
+    positions = result.read(fields.TENTACLE_POSITION, window)
+    margin = result.read(fields.BELL_MARGIN, window)
+    layout = root_layout(scene)
+    drawn_groups = []
+    for index, (group, rows) in enumerate(zip(groups, layout.slices(), strict=True)):
+        t = group.tentacles
+        own = positions[:, rows, : t.particles]
+        ring = _mouth_circle(margin, own[:, :, 0]) if t.placement == "mouth" else margin
+        curled = bool(np.any(rest_shape_for(scene.group_scene(index)) != 0.0))
+        f = t.interpolation if factor is None else factor
+        sizes = _clusters(t)
+        parts = []
+        edge = 0
+        for size in sizes:
+            parts.append(
+                interpolate_tentacles(
+                    own[:, edge : edge + size],
+                    ring,
+                    times[first:stop],
+                    f,
+                    t.spacing,
+                    lag_spread=lag,
+                    first=start - first,
+                    shape_space="curvatures" if curled else "positions",
+                    closed=len(sizes) == 1,
+                )
+            )
+            edge += size
+        drawn = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+        drawn_groups.append(DrawnGroup(group.name, index, t, drawn, rows))
+    return drawn_groups
+
+
+def gather_groups(drawn: list[DrawnGroup]) -> np.ndarray:
+    """The groups' drawn tentacles as one array (F, D, P, 3), P the longest chain's, the rows
+    beyond a shorter chain's own NaN; one group's array as it is."""
+    if len(drawn) == 1:
+        return drawn[0].positions
+    frames = drawn[0].positions.shape[0]
+    count = sum(g.positions.shape[1] for g in drawn)
+    particles = max(g.positions.shape[2] for g in drawn)
+    out = np.full((frames, count, particles, 3), np.nan)
+    row = 0
+    for g in drawn:
+        d, p = g.positions.shape[1:3]
+        out[:, row : row + d, :p] = g.positions
+        row += d
+    return out
+
+
+def drawn_group_index(drawn: list[DrawnGroup]) -> np.ndarray:
+    """The group (index into ``tentacle_groups``) of each row of :func:`gather_groups`."""
+    return np.concatenate([np.full(g.positions.shape[1], g.index, dtype=np.int32) for g in drawn])
+
+
+def interpolate_result(
+    result: TentacleFrames,
+    factor: int | None = None,
+    lag: float | None = None,
+    frames: tuple[int, int] | None = None,
+) -> np.ndarray:
+    """Drawn tentacles (F, D, P, 3) of an open result: every group's
+    (:func:`interpolate_groups`), gathered by :func:`gather_groups`. A one-group scene draws
+    T * factor tentacles.
+
+    ``factor`` defaults to each group's ``interpolation``; ``lag`` (s) to a quarter of the pulse
+    period (0 turns the anti-banding lag off). ``frames`` = (start, stop) gives only those
+    frames, (stop - start, D, P, 3), equal to the slice of the whole: it reads the frames from
+    ``lag`` before ``start`` on, which the lagged shapes need, and no others, and draws only
+    the frames asked for.
+    """
+    return gather_groups(interpolate_groups(result, factor, lag, frames))
