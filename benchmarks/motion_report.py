@@ -4,8 +4,10 @@
     python benchmarks/motion_report.py [PRESET ...] [--set KEY=VALUE ...] [--out DIR]
 
 Runs each preset with its own defaults (the whole duration; the moon-jelly presets take 10-15
-minutes each on 2 cores) and prints one Markdown row per preset, from
-:func:`jellysim.io.motion.tentacle_motion` over the second half of the run.
+minutes each on 2 cores) and prints one Markdown row per preset and tentacle group, from
+:func:`jellysim.io.motion.motion_by_group` over the second half of the run (a one-table preset
+has one group, "tentacles"). A lag of "-" is a group whose roots do not move sideways relative
+to the bell (no root motion to follow: coherence 0).
 """
 
 from __future__ import annotations
@@ -15,9 +17,16 @@ import time
 from pathlib import Path
 
 import jellysim
-from jellysim.io.motion import tentacle_motion
+from jellysim.io.motion import motion_by_group
 
-JELLYFISH = ("brown-jelly", "forced-tentacles", "moon-jelly", "moon-jelly-real-size")
+JELLYFISH = (
+    "brown-jelly",
+    "purple-jelly",
+    "lions-mane",
+    "forced-tentacles",
+    "moon-jelly",
+    "moon-jelly-real-size",
+)
 
 
 def main() -> None:
@@ -26,22 +35,35 @@ def main() -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--out", default="out/motion-report")
     args = parser.parse_args()
-    columns = ("preset", "analysed", "chord / length", "bend (mean, peak)", "root-to-tip lag")
-    print("| " + " | ".join((*columns, "coherence", "run")) + " |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    columns = (
+        "preset",
+        "group",
+        "tentacles",
+        "analysed",
+        "chord / length",
+        "bend (mean, peak)",
+        "root-to-tip lag",
+        "coherence",
+        "run",
+    )
+    print("| " + " | ".join(columns) + " |")
+    print("|" + " --- |" * len(columns))
     for preset in args.presets:
         start = time.perf_counter()
         with jellysim.run(
             preset, Path(args.out) / preset, overrides=args.overrides or None, force=True
         ) as r:
-            m = tentacle_motion(r)
+            motions = motion_by_group(r)
+            counts = {name: r.group_tentacles(name).size for name in motions}
         took = time.perf_counter() - start
-        print(
-            f"| `{preset}` | {m.start:.3g}-{m.end:.3g} s | {m.chord:.3f} | "
-            f"{100 * m.bend:.1f} %, {100 * m.bend_peak:.1f} % | {m.lag:.3g} s of {m.period:.3g} s "
-            f"| {m.coherence:.2f} | {took:.0f} s |",
-            flush=True,
-        )
+        for name, m in motions.items():
+            lag = f"{m.lag:.3g} s of {m.period:.3g} s" if m.coherence > 0.0 else "-"
+            print(
+                f"| `{preset}` | {name} | {counts[name]} | {m.start:.3g}-{m.end:.3g} s | "
+                f"{m.chord:.3f} | {100 * m.bend:.1f} %, {100 * m.bend_peak:.1f} % | {lag} | "
+                f"{m.coherence:.2f} | {took:.0f} s |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from jellysim import fields
-from jellysim.config import load_scene
+from jellysim.config import Scene, load_scene
 from jellysim.config.load import parse_override
 from jellysim.errors import InputError
 from jellysim.simulation import Simulation, make_loop
@@ -49,7 +49,10 @@ def sweep(
     overrides: Mapping[str, Any] | Sequence[str] | None = None,
     tentacle: int = 0,
 ) -> list[Trace]:
-    """Run ``scene`` once per value of ``key``; the traces of ``tentacle``'s root and tip."""
+    """Run ``scene`` once per value of ``key``; the traces of ``tentacle``'s root and tip.
+
+    ``tentacle`` numbers the simulated tentacles across every group, in the scene's order (the
+    result's T axis: ``tentacles/group`` tells its group); its tip is its own last particle."""
     base: dict[str, Any] = (
         dict(overrides)
         if isinstance(overrides, Mapping)
@@ -58,30 +61,47 @@ def sweep(
     traces = []
     for value in values:
         loaded = load_scene(scene, {**base, key: value})
-        if loaded.tentacles.count == 0:
+        if loaded.tentacle_count == 0:
             raise InputError(
                 f"{loaded.name} has no tentacles (tentacles.count = 0): a sweep traces a "
                 "tentacle's root and tip; set tentacles.count"
             )
-        if not 0 <= tentacle < loaded.tentacles.count:
-            raise InputError(
-                f"--tentacle {tentacle}: the scene has tentacles 0..{loaded.tentacles.count - 1}"
-            )
+        particles = _own_particles(loaded, tentacle)
         loop = make_loop(loaded)
-        xs = [_root_and_tip_x(loop, tentacle)]
+        xs = [_root_and_tip_x(loop, tentacle, particles)]
         for _ in range(loaded.frame_count - 1):
             loop.step_frame()
-            xs.append(_root_and_tip_x(loop, tentacle))
+            xs.append(_root_and_tip_x(loop, tentacle, particles))
         x = np.array(xs)
         time = np.arange(loaded.frame_count) / loaded.fps
         traces.append(Trace(value, time, x[:, 0], x[:, 1]))
     return traces
 
 
-def _root_and_tip_x(loop: Simulation, tentacle: int) -> np.ndarray:
-    """x (m) of ``tentacle``'s root and tip in the loop's current frame, (2,)."""
+def _own_particles(scene: Scene, tentacle: int) -> int:
+    """The particles of simulated tentacle ``tentacle``, numbered across the scene's groups in
+    order (as the result's T axis); raises :class:`InputError` listing the range (and each
+    group's part of it) for one the scene does not have."""
+    first = 0
+    ranges = []
+    for group in scene.groups:
+        count = group.tentacles.count
+        if first <= tentacle < first + count:
+            return group.tentacles.particles
+        if count:
+            ranges.append(f"{first}..{first + count - 1} {group.name}")
+        first += count
+    groups = f" ({', '.join(ranges)})" if len(scene.groups) > 1 else ""
+    raise InputError(
+        f"--tentacle {tentacle}: the scene has tentacles 0..{scene.tentacle_count - 1}{groups}"
+    )
+
+
+def _root_and_tip_x(loop: Simulation, tentacle: int, particles: int) -> np.ndarray:
+    """x (m) of ``tentacle``'s root and tip (its own last particle, ``particles`` - 1: the rows
+    beyond are NaN padding) in the loop's current frame, (2,)."""
     positions = loop.frame_values()[fields.TENTACLE_POSITION.path]
-    return np.array(positions[tentacle, [0, -1], 0])
+    return np.array(positions[tentacle, [0, particles - 1], 0])
 
 
 def plot_sweep(traces: Sequence[Trace], key: str, path: Path, title: str = "") -> Path:

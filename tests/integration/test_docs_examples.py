@@ -85,9 +85,11 @@ NOT_RUN = {
     "PyElastica; benchmarks/ are run by hand, not by the suite",
     "ssh -L 8000:127.0.0.1:8000 remote": "needs a remote machine; the jellysim command it "
     "names ('view DIR --no-browser --port 8000') is run here from docs/viewer.md",
-    "python benchmarks/motion_report.py brown-jelly forced-tentacles": "benchmarks/ are run by "
-    "hand (whole preset runs); what it reports is tests/unit/test_motion.py's tentacle_motion, "
-    "run there on the forced tentacles",
+    "python benchmarks/motion_report.py brown-jelly purple-jelly lions-mane forced-tentacles": (
+        "benchmarks/ are run by hand (whole preset runs); what it reports is "
+        "tests/unit/test_motion.py's tentacle_motion, run there on the forced tentacles, per "
+        "group as tests/integration/test_result_groups.py's motion_by_group"
+    ),
     "python benchmarks/motion_report.py brown-jelly --set flow.speed=0.3 --set bell.swim_speed=0.3 "
     "--set tentacles.particles=60 --set tentacles.rest_curvature=0 "
     "--set tentacles.rest_curvature_tip=0": "the same benchmark with the paper's Case 1 values; "

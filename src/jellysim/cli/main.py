@@ -64,7 +64,12 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--key", required=True, help="the scene key to vary, e.g. flow.speed")
     sweep.add_argument("--values", required=True, help="comma-separated TOML values")
     _add_set_option(sweep, "KEY=VALUE", "override a scene key for every run")
-    sweep.add_argument("--tentacle", type=int, default=0, help="which tentacle (default 0)")
+    sweep.add_argument(
+        "--tentacle",
+        type=int,
+        default=0,
+        help="which simulated tentacle, numbered across the tentacle groups in order (default 0)",
+    )
     sweep.add_argument("--out", default="out/sweeps", help="folder for the figure and the CSV")
     sweep.add_argument("--title", default="", help="figure title")
 

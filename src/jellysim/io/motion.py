@@ -2,7 +2,8 @@
 on screen"): how far they bend away from straight, and how long a motion of the root takes to
 reach the tip.
 
-For each frame and tentacle, with root x_0, tip x_{P-1} and length L = (P - 1) d:
+For each frame and tentacle, with root x_0, tip x_{P-1} (the tentacle's own last particle) and
+length L = (P - 1) d:
 
 - ``chord``: |x_{P-1} - x_0| / L, 1 for a straight tentacle;
 - ``bend``: the mean distance of the particles from the root-to-tip line, over L (0 straight;
@@ -16,7 +17,8 @@ For each frame and tentacle, with root x_0, tip x_{P-1} and length L = (P - 1) d
   length L at speed c (modulo the period).
 
 Statistics are taken over the second half of the run by default (after the start-up transient),
-over every tentacle.
+over every tentacle or over one group's (:func:`motion_by_group`); each chain is measured over its
+own particles, never the NaN rows that pad a group of shorter chains in the result.
 """
 
 from __future__ import annotations
@@ -98,20 +100,33 @@ def root_tip_lag(root: np.ndarray, tip: np.ndarray, dt: float) -> tuple[float, f
     return phase / (2.0 * np.pi) * period, period, float(abs(cross) / scale)
 
 
-def tentacle_motion(result: Result, start: float | None = None) -> Motion:
-    """The tentacles' :class:`Motion` from ``start`` (s; default half the run) to the end."""
+def _measured(
+    result: Result, groups: list[int], start: float | None
+) -> tuple[np.ndarray, int, list[np.ndarray], np.ndarray]:
+    """The frame times, the first frame analysed, and the chains of ``groups`` from it on, one
+    (F, Tg, Pg, 3) array per group trimmed to its own particles; the rim (F, T, 3) from it on."""
     times = result.time
     first = int(np.searchsorted(times, times[-1] / 2 if start is None else start))
     first = min(first, max(0, len(times) - 2))
-    positions = result.read(fields.TENTACLE_POSITION, slice(first, None))
-    chord, bend = chord_and_bend(positions)  # (F, T)
-    horizontal = positions[..., :2]  # (F, T, P, 2)
-    if positions.shape[1] >= 3:
-        rim = result.read(fields.BELL_RIM, slice(first, None))
-        horizontal = horizontal - rim.mean(axis=1)[:, None, None, :2]
-    root, tip = sideways(horizontal[:, :, 0], horizontal[:, :, -1])
+    frames = slice(first, None)
+    chains = [result.group_positions(g, frames) for g in groups]
+    return times, first, chains, result.read(fields.BELL_RIM, frames)
+
+
+def _motion(times: np.ndarray, first: int, chains: list[np.ndarray], rim: np.ndarray) -> Motion:
+    """:class:`Motion` of tentacles ``chains`` (one (F, Tg, Pg, 3) array per group, each of its
+    own particle count) whose base points are ``rim`` (F, T', 3), T' the tentacles of all
+    ``chains`` in order."""
+    measures = [chord_and_bend(x) for x in chains]  # (F, Tg) each
+    chord = np.concatenate([c for c, _ in measures], axis=1)
+    bend = np.concatenate([b for _, b in measures], axis=1)
+    root = np.concatenate([x[:, :, 0, :2] for x in chains], axis=1)  # (F, T', 2)
+    tip = np.concatenate([x[:, :, -1, :2] for x in chains], axis=1)
+    if root.shape[1] >= 3:
+        centre = rim.mean(axis=1)[:, None, :2]  # the roots' centroid follows the bell's drift
+        root, tip = root - centre, tip - centre
     dt = float(times[1] - times[0]) if len(times) > 1 else 0.0
-    lag, period, coherence = root_tip_lag(root, tip, dt)
+    lag, period, coherence = root_tip_lag(*sideways(root, tip), dt)
     return Motion(
         start=float(times[first]),
         end=float(times[-1]),
@@ -122,3 +137,30 @@ def tentacle_motion(result: Result, start: float | None = None) -> Motion:
         period=period,
         coherence=coherence,
     )
+
+
+def tentacle_motion(
+    result: Result, start: float | None = None, group: str | int | None = None
+) -> Motion:
+    """The tentacles' :class:`Motion` from ``start`` (s; default half the run) to the end: of
+    ``group``'s tentacles (a name or an index into ``result.tentacle_groups``), or of every
+    tentacle of every group (``None``), each chain its own particles (never the NaN rows that
+    pad a shorter group's)."""
+    groups = (
+        [result.group_number(group)]
+        if group is not None
+        else [g for g in range(len(result.tentacle_groups)) if result.group_tentacles(g).size]
+    )
+    numbers = np.concatenate([result.group_tentacles(g) for g in groups])
+    times, first, chains, rim = _measured(result, groups, start)
+    return _motion(times, first, chains, rim[:, numbers])
+
+
+def motion_by_group(result: Result, start: float | None = None) -> dict[str, Motion]:
+    """Each group's :class:`Motion` (:func:`tentacle_motion` of that group), by group name, in
+    the result's order; groups without tentacles are left out."""
+    return {
+        name: tentacle_motion(result, start, name)
+        for k, name in enumerate(result.tentacle_groups)
+        if result.group_tentacles(k).size
+    }

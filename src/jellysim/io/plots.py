@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from jellysim import fields
 from jellysim.io.result import Result
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 
 def _pyplot():  # type: ignore[no-untyped-def]
@@ -20,25 +23,55 @@ def _pyplot():  # type: ignore[no-untyped-def]
     return plt
 
 
-def root_tip_trace(result: Result, path: Path, tentacle: int = 0) -> Path:
-    """Paper Figs. 7-8: x of a tentacle's root and of its tip against time."""
+# Per group (index into the result's tentacle_groups): the colour of its simulated tentacles and
+# of the tentacles drawn between them; group 0 keeps the one-group figures' purple and orange.
+GROUP_COLOURS: tuple[tuple[str, str], ...] = (
+    ("tab:purple", "tab:orange"),
+    ("tab:green", "tab:olive"),
+    ("tab:blue", "tab:cyan"),
+    ("tab:red", "tab:pink"),
+    ("tab:brown", "tab:gray"),
+)
+
+
+def group_colours(index: int) -> tuple[str, str]:
+    """The (simulated, drawn) colours of group ``index``."""
+    return GROUP_COLOURS[index % len(GROUP_COLOURS)]
+
+
+def root_tip_trace(result: Result, path: Path, tentacle: int | None = None) -> Path:
+    """Paper Figs. 7-8: x of a tentacle's root and of its tip (its own last particle) against
+    time, one panel per tentacle group: each group's first tentacle, or the one ``tentacle``
+    (an index into the result's T tentacles, across groups)."""
     plt = _pyplot()
     time = result.time
-    x = result.tentacle_positions[:, tentacle, :, 0]
+    names = result.tentacle_groups
+    group = result.tentacle_group
+    particles = result.tentacle_particles
+    if tentacle is None:
+        picks = [int(np.flatnonzero(group == g)[0]) for g in np.unique(group)]
+    else:
+        picks = [range(group.size)[tentacle]]
+    positions = result.tentacle_positions
     scene = result.scene
-    fig, ax = plt.subplots(figsize=(8, 3.6), dpi=120)
-    ax.plot(time, x[:, 0], color="tab:red", lw=1.6, label="root")
-    ax.plot(time, x[:, -1], color="tab:blue", lw=1.2, label="tip")
-    ax.set_xlabel("time t [s]")
-    ax.set_ylabel("x [m]")
-    t = scene.tentacles
-    ax.set_title(
-        f"{scene.name}: tentacle {tentacle}, E = {t.youngs_modulus:g} Pa, "
-        f"v = {scene.flow.speed:g} m/s ({t.bending}, {t.root})",
-        fontsize=10,
+    fig, axes = plt.subplots(
+        len(picks), 1, figsize=(8, 0.4 + 3.2 * len(picks)), dpi=120, sharex=True, squeeze=False
     )
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper right")
+    for ax, k in zip(axes[:, 0], picks, strict=True):
+        x = positions[:, k, : particles[k], 0]
+        ax.plot(time, x[:, 0], color="tab:red", lw=1.6, label="root")
+        ax.plot(time, x[:, -1], color="tab:blue", lw=1.2, label="tip")
+        ax.set_ylabel("x [m]")
+        t = scene.groups[group[k]].tentacles
+        named = f"group {names[group[k]]}, " if len(names) > 1 else ""
+        ax.set_title(
+            f"{scene.name}: {named}tentacle {k}, E = {t.youngs_modulus:g} Pa, "
+            f"v = {scene.flow.speed:g} m/s ({t.bending}, {t.root})",
+            fontsize=10,
+        )
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right")
+    axes[-1, 0].set_xlabel("time t [s]")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -46,12 +79,16 @@ def root_tip_trace(result: Result, path: Path, tentacle: int = 0) -> Path:
 
 
 def tentacle_shapes(result: Result, path: Path, snapshots: int = 6) -> Path:
-    """Side view (x-z) of every simulated tentacle at a few times over the run."""
+    """Side view (x-z) of every simulated tentacle at a few times over the run, each over its own
+    particles, coloured by group (a legend names the groups when there are several)."""
     plt = _pyplot()
     frames = result.frames
     picks = np.unique(np.linspace(0, frames - 1, snapshots).round().astype(int))
     positions = result.read(fields.TENTACLE_POSITION, picks.tolist())
     margins = result.read(fields.BELL_MARGIN, picks.tolist())
+    names = result.tentacle_groups
+    group = result.tentacle_group
+    particles = result.tentacle_particles
     time = result.time
     fig, axes = plt.subplots(
         1, len(picks), figsize=(2.2 * len(picks), 4.4), dpi=120, sharex=True, sharey=True
@@ -60,22 +97,43 @@ def tentacle_shapes(result: Result, path: Path, snapshots: int = 6) -> Path:
         np.atleast_1d(axes), picks, positions, margins, strict=True
     ):
         centre = np.array([0.0, 0.0, margin[:, 2].mean()])  # in the bell's frame
-        x = chains - centre
         ring = np.vstack([margin, margin[:1]]) - centre
         ax.plot(ring[:, 0], ring[:, 2], color="0.5", lw=2)
-        for chain in x:
-            ax.plot(chain[:, 0], chain[:, 2], lw=1.2)
-            ax.plot(chain[-1, 0], chain[-1, 2], "o", color="tab:red", ms=2.5)
+        for k, chain in enumerate(chains):
+            x = chain[: particles[k]] - centre
+            # One group: a colour per tentacle, as before groups; several: one per group.
+            colour = None if len(names) == 1 else group_colours(int(group[k]))[0]
+            ax.plot(x[:, 0], x[:, 2], lw=1.2, color=colour)
+            ax.plot(x[-1, 0], x[-1, 2], "o", color="tab:red", ms=2.5)
         ax.set_title(f"t = {time[frame]:.2f} s", fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlabel("x [m]")
         ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("z - z(margin) [m]")
+    first = np.atleast_1d(axes)[0]
+    first.set_ylabel("z - z(margin) [m]")
+    if len(names) > 1:
+        counts = np.bincount(group, minlength=len(names))
+        _legend(
+            first,
+            [
+                (group_colours(g)[0], f"{name} ({counts[g]})")
+                for g, name in enumerate(names)
+                if counts[g]
+            ],
+        )
     fig.suptitle(f"{result.scene.name}: tentacle shapes (side view, bell frame)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def _legend(ax: Axes, entries: list[tuple[str, str]]) -> None:
+    """A legend of lines: (colour, label) each."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=colour, lw=1.5, label=label) for colour, label in entries]
+    ax.legend(handles=handles, loc="lower left", fontsize=7)
 
 
 def _meridians(vertices: np.ndarray, sectors: int) -> list[np.ndarray]:
@@ -107,29 +165,30 @@ def phase_frames(result: Result) -> tuple[int, int]:
 
 def jetting_and_relaxation(result: Result, path: Path) -> Path:
     """Paper Fig. 9: the jellyfish at the end of its jetting phase and late in its relaxation,
-    every drawn (interpolated) tentacle, in the bell's frame, side view."""
-    from jellysim.interpolation import interpolate_result
+    in the bell's frame, side view: each group's drawn (interpolated) tentacles, its simulated
+    ones over them, in the group's colours (:func:`group_colours`; one group: simulated purple,
+    drawn orange), each chain over its own particles."""
+    from jellysim.interpolation import interpolate_groups
 
     plt = _pyplot()
-    drawn = interpolate_result(result)
+    drawn = interpolate_groups(result)
     simulated = result.tentacle_positions
+    particles = result.tentacle_particles
     sectors = result.dataset(fields.BELL_MARGIN).shape[1]  # R: vertices per ring
     time = result.time
     scene = result.scene
-    factor = drawn.shape[1] // simulated.shape[1]
     fig, axes = plt.subplots(1, 2, figsize=(8.0, 5.2), dpi=120, sharex=True, sharey=True)
     names = ("jetting phase (full contraction)", "relaxation phase")
     for ax, frame, name in zip(axes, phase_frames(result), names, strict=True):
         origin = result.read(fields.BELL_CENTRE, frame)
         vertices = result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float64)
-        for k, chain in enumerate(drawn[frame] - origin):
-            ax.plot(
-                chain[:, 0],
-                chain[:, 2],
-                lw=0.9 if k % factor == 0 else 0.5,
-                color="tab:purple" if k % factor == 0 else "tab:orange",
-                alpha=0.9 if k % factor == 0 else 0.45,
-            )
+        for g in drawn:
+            own, between = group_colours(g.index)
+            for chain in g.positions[frame] - origin:
+                ax.plot(chain[:, 0], chain[:, 2], lw=0.5, color=between, alpha=0.45)
+            for k in range(simulated.shape[1])[g.simulated]:
+                chain = simulated[frame, k, : particles[k]] - origin
+                ax.plot(chain[:, 0], chain[:, 2], lw=0.9, color=own, alpha=0.9)
         for outline in _meridians(vertices - origin, sectors):
             ax.fill(outline[:, 0], outline[:, 2], color="tab:brown", alpha=0.6, lw=0)
             ax.plot(outline[:, 0], outline[:, 2], color="tab:brown", lw=1.2)
@@ -138,12 +197,30 @@ def jetting_and_relaxation(result: Result, path: Path) -> Path:
         ax.set_xlabel("x [m]")
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("z - z(bell) [m]")
-    t = scene.tentacles
-    fig.suptitle(
-        f"{scene.name}: E = {t.youngs_modulus:g} Pa, v = {scene.flow.speed:g} m/s, "
-        f"{simulated.shape[1]} simulated x {factor} drawn tentacles (cf. paper Fig. 9)",
-        fontsize=10,
-    )
+    if len(drawn) == 1:
+        t = scene.tentacles
+        g = drawn[0]
+        title = (
+            f"{scene.name}: E = {t.youngs_modulus:g} Pa, v = {scene.flow.speed:g} m/s, "
+            f"{simulated.shape[1]} simulated x {g.positions.shape[1] // max(1, simulated.shape[1])}"
+            " drawn tentacles (cf. paper Fig. 9)"
+        )
+    else:
+        title = (
+            f"{scene.name}: v = {scene.flow.speed:g} m/s; "
+            + ", ".join(
+                f"{g.name} {g.positions.shape[1]} drawn of "
+                f"{len(range(simulated.shape[1])[g.simulated])}"
+                for g in drawn
+            )
+            + " (cf. paper Fig. 9)"
+        )
+        _legend(
+            axes[0],
+            [(group_colours(g.index)[0], f"{g.name} (simulated)") for g in drawn]
+            + [(group_colours(g.index)[1], f"{g.name} (drawn)") for g in drawn],
+        )
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -29,6 +29,7 @@ import h5py
 import numpy as np
 
 from jellysim import fields
+from jellysim.config.schema import DEFAULT_GROUP
 from jellysim.errors import InputError, OutputError
 from jellysim.fields import Dataset, Field
 
@@ -506,6 +507,67 @@ class Result:
     def tentacle_velocities(self) -> np.ndarray:
         """(F, T, P, 3) float64, m/s: their velocities."""
         return self.read(fields.TENTACLE_VELOCITY)
+
+    @property
+    def tentacle_group(self) -> np.ndarray:
+        """(T,) int32, 1: the group of each simulated tentacle, an index into
+        :attr:`tentacle_groups`. A result written before tentacle groups (no
+        ``tentacles/group``) has one group: all zeros."""
+        if fields.TENTACLE_GROUP.path not in self.file and self.has(fields.TENTACLE_POSITION):
+            count = self.dataset(fields.TENTACLE_POSITION).shape[1]
+            return np.zeros(count, dtype=np.int32)
+        return self.read(fields.TENTACLE_GROUP)
+
+    @property
+    def tentacle_particles(self) -> np.ndarray:
+        """(T,) int32, 1: the particles of each simulated tentacle; its rows of
+        :attr:`tentacle_positions` and :attr:`tentacle_velocities` beyond them are NaN. A
+        result written before tentacle groups has P for every tentacle."""
+        if fields.TENTACLE_PARTICLES.path not in self.file and self.has(fields.TENTACLE_POSITION):
+            _, count, particles, _ = self.dataset(fields.TENTACLE_POSITION).shape
+            return np.full(count, particles, dtype=np.int32)
+        return self.read(fields.TENTACLE_PARTICLES)
+
+    @property
+    def tentacle_groups(self) -> list[str]:
+        """The names of the tentacle groups, in the scene's order (``tentacle_group`` indexes
+        them); ``["tentacles"]`` for a one-table scene and for results written before groups."""
+        names = self.file.attrs.get("tentacle_groups")
+        if names is None:
+            return [DEFAULT_GROUP]
+        return [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(names)]
+
+    def group_number(self, group: str | int) -> int:
+        """The index of ``group`` (its name, or its index) in :attr:`tentacle_groups`; raises
+        :class:`InputError` naming the groups for one the result does not have."""
+        names = self.tentacle_groups
+        if isinstance(group, int | np.integer) and not isinstance(group, bool):
+            if 0 <= group < len(names):
+                return int(group)
+        elif group in names:
+            return names.index(str(group))
+        listed = ", ".join(f"{k} '{name}'" for k, name in enumerate(names))
+        raise InputError(f"{self.path}: no tentacle group {group!r}; its groups are {listed}")
+
+    def group_tentacles(self, group: str | int) -> np.ndarray:
+        """(Tg,) int64: the simulated tentacles (indices into the T axis) of ``group`` (a name
+        or an index into :attr:`tentacle_groups`), in order."""
+        return np.flatnonzero(self.tentacle_group == self.group_number(group))
+
+    def group_positions(self, group: str | int, frames: Frames | None = None) -> np.ndarray:
+        """(F, Tg, Pg, 3) float64, m: the particles of ``group``'s Tg tentacles, root first,
+        trimmed to the group's own Pg particles (no NaN padding); ``frames`` as in
+        :meth:`read` (an index drops the frame axis)."""
+        return self._group_rows(fields.TENTACLE_POSITION, group, frames)
+
+    def group_velocities(self, group: str | int, frames: Frames | None = None) -> np.ndarray:
+        """(F, Tg, Pg, 3) float64, m/s: their velocities, as :meth:`group_positions`."""
+        return self._group_rows(fields.TENTACLE_VELOCITY, group, frames)
+
+    def _group_rows(self, field: Field, group: str | int, frames: Frames | None) -> np.ndarray:
+        rows = self.group_tentacles(group)
+        particles = int(self.tentacle_particles[rows].max()) if rows.size else 0
+        return self.read(field, frames)[..., rows, :particles, :]
 
     @property
     def tentacle_constraint_error(self) -> np.ndarray:
