@@ -151,8 +151,9 @@ def manubrium(
     vertices: np.ndarray | None, centre: np.ndarray | None, groups: Sequence[DrawnTentacles]
 ) -> Manubrium | None:
     """The stalk oral arms hang from, for a frame with a bell and a group placed at the mouth:
-    from the subumbrella's centre (the lowest bell vertex within ``AXIS_FRACTION`` of the bell's
-    radius of the vertical axis through the margin ``centre`` and above it; the inner apex)
+    from the subumbrella's centre (on the vertical axis through the margin ``centre``, at the
+    height of the lowest bell vertex within ``AXIS_FRACTION`` of the bell's radius of that axis
+    and above the roots: the inner apex)
     down to the centre of the mouth groups' roots, ``MANUBRIUM_FLARE`` times their circle's
     radius at the top, their circle's at the bottom. None otherwise."""
     roots = [g.positions[:, 0] for g in groups if g.look.placement == "mouth" and g.positions.size]
@@ -165,7 +166,7 @@ def manubrium(
     near_axis = (horizontal <= AXIS_FRACTION * horizontal.max()) & (vertices[:, 2] > bottom[2])
     if not near_axis.any():
         return None
-    top = vertices[near_axis][np.argmin(vertices[near_axis, 2])]
+    top = np.array([centre[0], centre[1], vertices[near_axis, 2].min()])  # on the axis
     return Manubrium(top, bottom, MANUBRIUM_FLARE * radius, radius)
 
 

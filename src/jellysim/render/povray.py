@@ -5,12 +5,13 @@ Swapping y and z maps one onto the other without mirroring the picture (:func:`v
 
 Looks (docs/rendering.md): the bell is a smooth ``mesh2`` with vertex normals, translucent
 mesoglea with a Fresnel-like rim (the ``aoi`` pattern) and radial stripes, at final quality
-glowing, refracting and holding a scattering medium; every tentacle is a tapered tube made of
-short cones with a sphere at each joint, all of a jellyfish's tentacles in one ``union`` (far
-faster to parse and trace than one ``sphere_sweep`` per tentacle); three lights after the
-paper's Fig. 12 (key, fill and back); the water a ground fog for the depth fade, with drifting
-marine snow and, at final quality, light shafts from above and depth of field; optionally the
-paper's room with a water tank.
+glowing, refracting and holding a scattering medium; tentacles group by group, each in its own
+look: a thread group's tentacles tapered tubes made of short cones with a sphere at each joint,
+in one ``union`` (far faster to parse and trace than one ``sphere_sweep`` per tentacle), a
+ribbon group's oral arms ruffled curtains in one ``mesh2``, hung from a manubrium (a cone);
+three lights after the paper's Fig. 12 (key, fill and back); the water a ground fog for the
+depth fade, with drifting marine snow and, at final quality, light shafts from above and depth
+of field; optionally the paper's room with a water tank.
 """
 
 from __future__ import annotations
