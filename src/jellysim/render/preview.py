@@ -22,6 +22,9 @@ Matplotlib ``PolyCollection``, sorted far to near by the distance of its centre 
   least ``MIN_HALF_WIDTH``), in the tentacle's face-on colour (``tentacle_transparency``), lit
   as thin cylinders: brightness ``TENTACLE_AMBIENT +
   (1 - TENTACLE_AMBIENT) sin a`` with ``a`` the angle between the segment and the key light.
+- Tentacle groups: each group in its own look (:func:`~jellysim.render.materials.group_look`);
+  a ribbon group's oral arms as the triangles of the meshes POV-Ray draws, shaded as the bell
+  (:func:`~jellysim.render.ribbons.ribbon_primitives`), the manubrium as a cone's triangles.
 - Fluid particles: translucent hexagons of radius ``fluid_radius`` projected (at least
   ``MIN_HALF_WIDTH``), in the water colour moved ``FLUID_TINT`` of the way to white.
 - Depth fade (exponential fog): a colour at distance ``d`` from the camera keeps the fraction
