@@ -106,9 +106,7 @@ def test_preview(brown: jellysim.Result, expected) -> None:
     # The tentacles: their face-on colour times a grey brightness (the lighting).
     drawn = interpolate_result(brown, 1)
     camera = Camera(location=np.array([0.0, -1.0, -0.2]), look_at=np.array([0.0, 0.0, -0.2]))
-    ribbons = tentacle_primitives(
-        Jellyfish(drawn[0], None, None, look), make_view(camera, 320, 240), 1e-3, 1
-    )
+    ribbons = tentacle_primitives(drawn[0], look, make_view(camera, 320, 240), 1e-3, 1)
     assert len(ribbons.rgba) > 0
     brightness = ribbons.rgba[:, :3] / np.asarray(expected["tentacle_face"])
     np.testing.assert_allclose(brightness, brightness[:, :1] * np.ones((1, 3)), rtol=1e-9)

@@ -80,7 +80,7 @@ def test_fluid_only_results_render_their_live_particles(tmp_path: Path, renderer
         pytest.skip("POV-Ray is not installed")
     with jellysim.open_result(_fluid_result(tmp_path / "fluid", dead=7)) as result:
         members = make_members([result], 1, None, 0)
-        assert members[0].tentacles.shape[1] == 0
+        assert members[0].groups == ()
         points = members[0].fluid_points(2)
         assert points.shape == (93, 3) and np.all(points[:, 1] == 0.0)  # (x, y) -> (x, 0, y)
         done = render([result], tmp_path / "r", renderer=renderer, size=(48, 48), video=False)
@@ -134,3 +134,63 @@ def test_fluid_around_a_jellyfish_is_left_out_unless_asked(
             render([result], tmp_path / "bad", fluid="cubes", size=(32, 32), video=False)
     assert spheres["auto"] == spheres["none"] == 0
     assert spheres["spheres"] == count
+
+
+@pytest.fixture(scope="module")
+def purple(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
+    folder = tmp_path_factory.mktemp("purple")
+    return jellysim.run("purple-jelly", folder, overrides={"duration": 0.3, "fps": 10.0})
+
+
+def test_a_one_group_result_draws_as_before_groups(brown: jellysim.Result) -> None:
+    """The pipeline's groups against the path it replaced: the whole result's drawn tentacles
+    in the jellyfish's own look (Jellyfish.tentacles), the text byte for byte."""
+    from dataclasses import replace
+
+    from jellysim.interpolation import interpolate_result
+    from jellysim.render.frame import Frame
+    from jellysim.render.pipeline import frame_cameras
+
+    (member,) = make_members([brown], 1, None, 0, fluid=False)
+    cameras, extent, _ = frame_cameras([member], brown.frames, (64, 48), "auto")
+    drawn = interpolate_result(brown)
+    for index in (0, brown.frames - 1):
+        new = member.frame(index)
+        old = replace(new, tentacles=drawn[index], groups=(), centre=None)
+        for quality in povray.QUALITIES.values():
+            texts = [
+                povray.scene_text(Frame(0.0, [j]), cameras[index], (64, 48), quality, extent)
+                for j in (new, old)
+            ]
+            assert texts[0] == texts[1]
+
+
+def test_oral_arms_are_ribbons_on_a_manubrium_and_no_nan_is_drawn(purple: jellysim.Result) -> None:
+    from jellysim.render.frame import Frame
+    from jellysim.render.pipeline import frame_cameras
+
+    assert np.isnan(purple.read(fields.TENTACLE_POSITION, 0)).any()  # the padded store
+    members = make_members([purple], 2, None, 0, fluid=False)
+    cameras, extent, _ = frame_cameras(members, purple.frames, (64, 48), "auto")
+    assert np.isfinite(extent)
+    assert all(np.isfinite(c.location).all() for c in cameras)
+    jelly = members[1].frame(1)
+    marginal, arms = jelly.groups
+    assert (marginal.look.form, arms.look.form) == ("thread", "ribbon")
+    assert marginal.positions.shape == (80, 41, 3) and arms.positions.shape == (4, 21, 3)
+    assert np.isfinite(marginal.positions).all() and np.isfinite(arms.positions).all()
+    assert arms.first == 80
+    # The manubrium reaches from inside the bell down to the arms' roots.
+    stalk = jelly.manubrium
+    assert stalk is not None and jelly.bell_vertices is not None and jelly.centre is not None
+    roots = arms.positions[:, 0]
+    assert np.allclose(stalk.bottom, roots.mean(axis=0))
+    assert stalk.top[2] > jelly.centre[2] and stalk.top[2] < jelly.bell_vertices[:, 2].max()
+    assert np.linalg.norm(stalk.top[:2] - jelly.centre[:2]) < 0.2 * 0.05
+    text = povray.scene_text(
+        Frame(0.0, [members[0].frame(1)]), cameras[1], (64, 48), povray.QUALITIES["final"], extent
+    )
+    assert "nan" not in text.lower()
+    assert text.count("mesh2 {") == 2 and "cone { " in text
+    # A school shifts each group's hue: the second jellyfish's arms are not the first's colour.
+    assert members[1].groups[1].look.color != members[0].groups[1].look.color

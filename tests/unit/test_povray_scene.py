@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -143,3 +144,88 @@ def test_stripes_default_to_half_the_lobes_and_new_look_keys_reach_the_renderer(
     assert scene_look(brown).stripes == brown.bell.lobes // 2 > 0
     look = scene_look(brown, ["look.stripes=0", "look.rim=0.2", "look.marine_snow=7"])
     assert (look.stripes, look.rim, look.marine_snow) == (0, 0.2, 7)
+
+
+# sha256 of text("draft") and text("final") as the branch's starting commit (b86ea3a, before
+# tentacle groups reached the renderers) wrote them: a one-group jellyfish's scene is unchanged.
+STARTING_COMMIT_SHA256 = {
+    "draft": "d1544cb297ac2865d306bd4f4f8fe4131711b487a173e0e901bd445c40fcb029",
+    "final": "b9ad75f8a88fbae496844cf2faa8b0284d5c7ffc97e6693c2bc2247dc0ff2672",
+}
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_a_one_group_scene_is_the_text_of_the_starting_commit(quality: str) -> None:
+    import hashlib
+
+    assert hashlib.sha256(text(quality).encode()).hexdigest() == STARTING_COMMIT_SHA256[quality]
+
+
+def two_groups(padding: int = 0) -> Frame:
+    """The octahedron bell with red threads (margin) and four green ribbon arms hung from a
+    manubrium; the arms' positions padded with ``padding`` NaN rows, trimmed as the pipeline
+    trims them."""
+    from jellysim.render.frame import DrawnTentacles, Manubrium
+    from jellysim.render.materials import group_look
+    from jellysim.render.pipeline import finite_rows
+
+    vertices, faces = octahedron()
+    look = Look()
+    threads = np.stack([np.linspace([0.1, 0.0, 0.0], [0.1, 0.0, -0.3], 12)] * 3)
+    angle = 0.5 * np.pi * np.arange(4)
+    roots = 0.02 * np.stack([np.cos(angle), np.sin(angle), np.zeros(4)], axis=1)
+    arms = roots[:, None] + np.linspace(0.0, 1.0, 8)[:, None] * np.array([0.0, 0.0, -0.2])
+    arms = np.concatenate([arms, np.full((4, padding, 3), np.nan)], axis=1)
+    tentacles = SimpleNamespace(
+        color=(0.9, 0.1, 0.1), form="thread", drawn_radius=0.003, spacing=0.01
+    )
+    oral = SimpleNamespace(
+        color=(0.1, 0.8, 0.2), form="ribbon", placement="mouth", ribbon_width=0.03, spacing=0.01
+    )
+    groups = (
+        DrawnTentacles(threads, group_look(look, tentacles, "marginal")),
+        DrawnTentacles(finite_rows(arms), group_look(look, oral, "oral_arms"), 3),
+    )
+    stalk = Manubrium(np.array([0.0, 0.0, 0.05]), np.zeros(3), 0.03, 0.02)
+    jelly = Jellyfish(
+        np.empty((0, 2, 3)), vertices, faces, look, groups, np.zeros(3), manubrium=stalk
+    )
+    return Frame(0.0, [jelly])
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_each_group_is_drawn_in_its_look_and_no_nan_reaches_the_scene(quality: str) -> None:
+    scene = povray.scene_text(two_groups(padding=5), CAMERA, SIZE, povray.QUALITIES[quality], 0.4)
+    assert "nan" not in scene.lower()
+    assert scene.count("mesh2 {") == 2  # the bell and the ribbon arms
+    ribbon = scene[scene.rindex("mesh2 {") :]
+    assert "<0.1,0.8,0.2," in ribbon  # the arms' colour, with its transmit
+    assert "rgb <0.9,0.1,0.1>" in scene  # the threads' colour at their edges
+    assert "cone{<0.1,0,0>,0.003," in scene  # the threads' own root radius
+    assert "cone { <0,0.05,0>, 0.03, <0,0,0>, 0.02" in scene  # the manubrium
+    # The arms are drawn to their last finite particle, as without padding.
+    unpadded = povray.scene_text(two_groups(), CAMERA, SIZE, povray.QUALITIES[quality], 0.4)
+    assert scene == unpadded
+
+
+def test_arms_do_not_ruffle_in_lockstep() -> None:
+    from jellysim.render.povray import arm_meshes
+    from jellysim.render.ribbons import ROWS
+
+    jelly = two_groups().jellyfish[0]
+    meshes = arm_meshes(jelly, jelly.groups[1])
+    # Turned into one arm's place, the four arms' surfaces differ: each has its own phase.
+    shapes = []
+    for k, mesh in enumerate(meshes):
+        turn = -0.5 * np.pi * k
+        rotation = np.array(
+            [[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0, 0, 1]]
+        )
+        shapes.append(mesh.vertices @ rotation.T)
+    assert all(len(s) == len(shapes[0]) for s in shapes)
+    assert min(np.abs(s - shapes[0]).max() for s in shapes[1:]) > 1e-3
+    # Each arm's width starts radially out from the axis at its root.
+    for k, mesh in enumerate(meshes):
+        across = mesh.vertices[ROWS - 1] - mesh.vertices[0]  # the root's row, edge to edge
+        radial = np.array([np.cos(0.5 * np.pi * k), np.sin(0.5 * np.pi * k), 0.0])
+        assert abs(across @ radial) > 0.8 * np.linalg.norm(across)

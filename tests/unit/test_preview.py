@@ -213,3 +213,34 @@ def test_final_quality_keeps_the_size_and_unknown_quality_is_refused(tmp_path):
     assert image.shape == (SIZE[1], SIZE[0], 3)
     with pytest.raises(InputError, match="quality"):
         render_preview(Frame(0.0, []), camera_at(1.0), SIZE, tmp_path / "x.png", "best")
+
+
+def test_ribbon_arms_show_in_their_colour_below_the_bell_and_threads_in_theirs(tmp_path):
+    from types import SimpleNamespace
+
+    from jellysim.render.frame import DrawnTentacles
+    from jellysim.render.materials import group_look
+
+    angle = 0.5 * np.pi * np.arange(4) + 0.25 * np.pi  # no arm edge-on to the camera on +x
+    roots = 0.02 * np.stack([np.cos(angle), np.sin(angle), np.zeros(4)], axis=1)
+    arms = roots[:, None] + np.linspace(0.0, 1.0, 10)[:, None] * np.array([0.0, 0.0, -0.15])
+    green = SimpleNamespace(color=(0.05, 0.8, 0.1), form="ribbon", ribbon_width=0.04, spacing=0.01)
+    red = SimpleNamespace(color=(0.9, 0.05, 0.05), drawn_radius=0.004, spacing=0.01)
+    vertices, faces = dome()
+    groups = (
+        DrawnTentacles(hanging_tentacles(), group_look(LOOK, red, "marginal")),
+        DrawnTentacles(arms, group_look(LOOK, green, "oral_arms"), 6),
+    )
+    jelly = Jellyfish(np.empty((0, 2, 3)), vertices, faces, LOOK, groups, np.zeros(3))
+    camera = camera_at(0.6)
+    image = render(tmp_path, Frame(0.0, [jelly]), camera).astype(float)
+    view = make_view(camera, *SIZE)
+    (_, margin_row), _ = project(np.array([0.0, 0.0, 0.0]), view)
+    below = image[int(margin_row) + 3 :]
+    r, g, b = below[..., 0], below[..., 1], below[..., 2]
+    arm_pixels = (g > r + 40) & (g > b + 20)
+    thread_pixels = (r > g + 40) & (r > b + 20)
+    assert arm_pixels.sum() > 100  # the curtains, in their own green, under the bell
+    assert thread_pixels.sum() > 30  # the threads in their red
+    columns = np.nonzero(arm_pixels.any(axis=0))[0]
+    assert abs(0.5 * (columns.min() + columns.max()) - SIZE[0] / 2) < 10  # centred under it

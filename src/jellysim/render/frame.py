@@ -6,8 +6,12 @@ else, so they cannot drift apart in what they show.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from jellysim.render.materials import GroupLook
 
 RGB = tuple[float, float, float]
 FLUID_COLOR: RGB = (0.6, 0.8, 1.0)  # fluid particles, linear RGB (every renderer and export)
@@ -52,18 +56,59 @@ class Look:
 
 
 @dataclass(frozen=True)
+class DrawnTentacles:
+    """One group of a jellyfish's drawn tentacles in one frame: ``positions`` (N, P, 3) m, root
+    first, every point finite (a padded result's NaN rows trimmed); ``look`` its resolved look
+    (:func:`jellysim.render.materials.group_look`); ``first`` the drawn index of its first row
+    among the jellyfish's drawn tentacles (seeds per-arm differences, such as a ribbon's
+    phase)."""
+
+    positions: np.ndarray
+    look: GroupLook
+    first: int = 0
+
+
+@dataclass(frozen=True)
+class Manubrium:
+    """The stalk oral arms hang from: a cone from ``top`` (3,) m (the subumbrella's centre), of
+    radius ``top_radius`` m, down to ``bottom`` (3,) m (the centre of the arms' roots) of radius
+    ``bottom_radius`` m (their circle's)."""
+
+    top: np.ndarray
+    bottom: np.ndarray
+    top_radius: float
+    bottom_radius: float
+
+
+@dataclass(frozen=True)
 class Jellyfish:
     """One jellyfish in one frame.
 
     ``bell_vertices`` (V, 3) m and ``bell_faces`` (M, 3) int (counter-clockwise seen from
     outside), or both None for a result without a bell body; ``tentacles`` (N, P, 3) m, root
-    first (the drawn, interpolated tentacles).
+    first, drawn as threads in ``look``'s tentacle colour, radius and taper; ``groups`` further
+    drawn tentacles, each group in its own look (the render pipeline puts every scene group
+    here and leaves ``tentacles`` empty); ``centre`` (3,) m the bell's margin centre (the axis
+    ribbons turn out from), ``manubrium`` the stalk of a scene with oral arms.
     """
 
     tentacles: np.ndarray
     bell_vertices: np.ndarray | None
     bell_faces: np.ndarray | None
     look: Look
+    groups: tuple[DrawnTentacles, ...] = ()
+    centre: np.ndarray | None = None
+    manubrium: Manubrium | None = None
+
+    def drawn(self) -> tuple[DrawnTentacles, ...]:
+        """Every group to draw: ``tentacles`` in the jellyfish's own look (if any), then
+        ``groups``."""
+        from jellysim.render.materials import group_look
+
+        own = np.asarray(self.tentacles)
+        if own.ndim != 3 or own.shape[0] == 0:
+            return self.groups
+        return (DrawnTentacles(own, group_look(self.look)), *self.groups)
 
 
 @dataclass(frozen=True)
@@ -92,3 +137,9 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def tentacle_radii(particles: int, look: Look) -> np.ndarray:
     """Radius (m) at each particle of a drawn tentacle, (P,): linear taper from the root."""
     return look.tentacle_radius * np.linspace(1.0, look.tentacle_taper, particles)
+
+
+def ribbon_phase(index: int) -> float:
+    """The ruffle phase (rad) of the drawn arm ``index``: golden-angle steps, so no two arms of
+    a jellyfish ruffle in lockstep and the same arm keeps its phase from frame to frame."""
+    return (2.399963229728653 * index) % (2.0 * np.pi)

@@ -14,7 +14,8 @@ draw them (docs/rendering.md, "Which output honours which key").
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -68,6 +69,69 @@ def tentacle_material(look: Look) -> Material:
         opacity=1.0,
         emissive=(0.0, 0.0, 0.0),
         roughness=0.6,
+    )
+
+
+RIBBON_WIDTH_SPACINGS = 4.0  # a ribbon's width at the root, unset: this many particle spacings
+RUFFLE_DEPTH = 0.3  # a ribbon's ruffle amplitude, unset: this fraction of its width
+
+
+@dataclass(frozen=True)
+class GroupLook:
+    """How one group of tentacles is drawn, every default resolved: ``form`` "thread" (a tapered
+    tube of ``radius`` m at the root, ``taper`` of that at the tip) or "ribbon" (a ruffled
+    curtain ``ribbon_width`` m wide at the root, ``taper`` of that at the tip, ``ruffles`` waves
+    per metre along it, ``ruffle_depth`` of the width deep), in ``color`` (linear RGB);
+    ``placement`` "margin" or "mouth" (oral arms, hung from the manubrium)."""
+
+    name: str
+    form: str
+    color: RGB
+    radius: float
+    taper: float
+    ribbon_width: float
+    ruffles: float
+    ruffle_depth: float
+    placement: str
+
+
+def group_look(look: Look, tentacles: Any = None, name: str = "tentacles") -> GroupLook:
+    """The one place a group's drawn look is resolved: its keys (a scene's
+    :class:`~jellysim.config.schema.Tentacles` of the group; None: every key unset) over
+    ``look``'s ``tentacle_color``, ``tentacle_radius`` and ``tentacle_taper``; a ribbon
+    ``RIBBON_WIDTH_SPACINGS`` spacings wide, ``1 / (2 ribbon_width)`` ruffles per metre and
+    ``RUFFLE_DEPTH`` deep where unset (the schema's documented defaults)."""
+
+    def key(name: str) -> Any:
+        return None if tentacles is None else getattr(tentacles, name, None)
+
+    def unset(value: Any, fallback: Any) -> Any:
+        return fallback if value is None else value
+
+    spacing = key("spacing")
+    width = unset(
+        key("ribbon_width"),
+        RIBBON_WIDTH_SPACINGS * spacing if spacing else 4.0 * look.tentacle_radius,
+    )
+    color = key("color")
+    return GroupLook(
+        name=name,
+        form=unset(key("form"), "thread"),
+        color=look.tentacle_color if color is None else _rgb(np.asarray(color, dtype=np.float64)),
+        radius=float(unset(key("drawn_radius"), look.tentacle_radius)),
+        taper=float(unset(key("taper"), look.tentacle_taper)),
+        ribbon_width=float(width),
+        ruffles=float(unset(key("ruffles"), 1.0 / (2.0 * width))),
+        ruffle_depth=float(unset(key("ruffle_depth"), RUFFLE_DEPTH)),
+        placement=unset(key("placement"), "margin"),
+    )
+
+
+def thread_look(look: Look, group: GroupLook) -> Look:
+    """``look`` with the group's colour, radius and taper as its tentacles': what the thread
+    renderers (and :func:`tentacle_face_color`) read."""
+    return replace(
+        look, tentacle_color=group.color, tentacle_radius=group.radius, tentacle_taper=group.taper
     )
 
 

@@ -29,7 +29,8 @@ from jellysim.errors import InputError
 from jellysim.io.folders import output_folder
 from jellysim.io.result import Result
 from jellysim.progress import progress
-from jellysim.render.frame import Camera, Frame, Jellyfish, Look
+from jellysim.render.frame import Camera, DrawnTentacles, Frame, Jellyfish, Look, Manubrium
+from jellysim.render.materials import GroupLook, group_look
 
 SETTINGS_FILE = "render.json"
 VIEW_DIRECTION = np.array([0.0, 1.0, -0.25])  # the camera looks along +y, a little down
@@ -38,15 +39,26 @@ SCHOOL_SPACING = 1.3  # neighbours in a school, in jellyfish sizes
 
 
 @dataclass(frozen=True)
+class MemberGroup:
+    """One tentacle group of a :class:`Member`: its drawn tentacles ``positions`` (F, D, P, 3) m
+    (the group's own particles: no padding), its resolved ``look``, and ``first`` the drawn
+    index of its first row."""
+
+    positions: np.ndarray
+    look: GroupLook
+    first: int
+
+
+@dataclass(frozen=True)
 class Member:
     """One jellyfish of the picture: a result, shifted by ``offset`` (3,) m, ``phase`` frames
-    later in its cycle (looping), drawn with ``look``."""
+    later in its cycle (looping), drawn with ``look`` and its tentacle ``groups``."""
 
     result: Result
     offset: np.ndarray
     phase: int
     look: Look
-    tentacles: np.ndarray  # (F, N, P, 3) drawn (interpolated) tentacles, m; N = 0 for none
+    groups: tuple[MemberGroup, ...]
     bell_vertices: Any  # h5py dataset (F, V, 3) or None
     bell_faces: np.ndarray | None
     fluid: Any = None  # h5py dataset (F, K, D) of fluid particles, D = 2 or 3, or None
@@ -68,13 +80,27 @@ class Member:
         return to_world(points) + self._move(index)
 
     def frame(self, index: int) -> Jellyfish:
-        count = self.tentacles.shape[0]
+        count = self.result.frames
         k = (index + self.phase) % count
         move = self._move(index)
         vertices = None
         if self.bell_vertices is not None:
             vertices = np.asarray(self.bell_vertices[k], dtype=np.float64) + move
-        return Jellyfish(self.tentacles[k] + move, vertices, self.bell_faces, self.look)
+        groups = tuple(
+            DrawnTentacles(finite_rows(g.positions[k]) + move, g.look, g.first) for g in self.groups
+        )
+        centre = None
+        if self.result.has(fields.BELL_MARGIN):
+            centre = self.result.read(fields.BELL_MARGIN, k).astype(np.float64).mean(axis=0) + move
+        return Jellyfish(
+            np.empty((0, 2, 3)),
+            vertices,
+            self.bell_faces,
+            self.look,
+            groups=groups,
+            centre=centre,
+            manubrium=manubrium(vertices, centre, groups),
+        )
 
     def centres(self) -> np.ndarray:
         """The bell's margin centre per frame (F, 3), shifted and phased as drawn (the centre
@@ -91,9 +117,11 @@ class Member:
         frames = self.result.frames
         low = np.full((frames, 3), np.inf)
         high = np.full((frames, 3), -np.inf)
-        if self.tentacles.shape[1] > 0:
-            points = self.tentacles.reshape(self.tentacles.shape[0], -1, 3)
-            low, high = points.min(axis=1), points.max(axis=1)
+        for group in self.groups:
+            points = group.positions.reshape(frames, -1, 3)
+            if points.shape[1] > 0:
+                low = np.fmin(low, np.nanmin(points, axis=1))  # padding and gaps are not drawn
+                high = np.fmax(high, np.nanmax(points, axis=1))
         if self.fluid is not None:
             for frame in range(frames):
                 points = to_world(np.asarray(self.fluid[frame], dtype=np.float64))
@@ -106,6 +134,40 @@ class Member:
         k = (np.arange(low.shape[0]) + self.phase) % low.shape[0]
         shift = 0.0 if self.shift is None else self.shift[:, None]
         return np.stack([low[k], high[k]], axis=1) + self.offset + shift
+
+
+def finite_rows(tentacles: np.ndarray) -> np.ndarray:
+    """Drawn tentacles (N, P, 3) up to the first particle not finite in every one of them (a
+    padded or diverged chain's tail): nothing NaN reaches a renderer."""
+    finite = np.isfinite(tentacles).all(axis=(0, 2))
+    return tentacles if finite.all() else tentacles[:, : int(np.argmin(finite))]
+
+
+MANUBRIUM_FLARE = 1.3  # the manubrium's radius under the bell, in radii of the arms' circle
+AXIS_FRACTION = 0.15  # the subumbrella's centre: the lowest bell vertex this near the axis
+
+
+def manubrium(
+    vertices: np.ndarray | None, centre: np.ndarray | None, groups: Sequence[DrawnTentacles]
+) -> Manubrium | None:
+    """The stalk oral arms hang from, for a frame with a bell and a group placed at the mouth:
+    from the subumbrella's centre (on the vertical axis through the margin ``centre``, at the
+    height of the lowest bell vertex within ``AXIS_FRACTION`` of the bell's radius of that axis
+    and above the roots: the inner apex)
+    down to the centre of the mouth groups' roots, ``MANUBRIUM_FLARE`` times their circle's
+    radius at the top, their circle's at the bottom. None otherwise."""
+    roots = [g.positions[:, 0] for g in groups if g.look.placement == "mouth" and g.positions.size]
+    if vertices is None or centre is None or not roots:
+        return None
+    points = np.concatenate(roots)
+    bottom = points.mean(axis=0)
+    radius = float(np.linalg.norm((points - bottom)[:, :2], axis=1).mean())
+    horizontal = np.linalg.norm((vertices - centre)[:, :2], axis=1)
+    near_axis = (horizontal <= AXIS_FRACTION * horizontal.max()) & (vertices[:, 2] > bottom[2])
+    if not near_axis.any():
+        return None
+    top = np.array([centre[0], centre[1], vertices[near_axis, 2].min()])  # on the axis
+    return Manubrium(top, bottom, MANUBRIUM_FLARE * radius, radius)
 
 
 def to_world(points: np.ndarray) -> np.ndarray:
@@ -192,14 +254,7 @@ def make_members(
     """The jellyfish to draw: every result once, or a school of ``school`` jellyfish cycling
     through the results on a jittered grid with random phase shifts and hue shifts; their fluid
     particles too when ``fluid``."""
-    from jellysim.interpolation import interpolate_result
-
-    drawn = [
-        interpolate_result(r, interpolation)
-        if r.has(fields.TENTACLE_POSITION)
-        else np.zeros((r.frames, 0, 1, 3))
-        for r in results
-    ]
+    drawn = [member_groups(r, interpolation, scene_look(r.scene, look_overrides)) for r in results]
     count = max(school, len(results))
     rng = np.random.default_rng(seed)
     size = max(_extent(r, d, fluid) for r, d in zip(results, drawn, strict=True))
@@ -209,6 +264,7 @@ def make_members(
         which = index % len(results)
         result = results[which]
         look = scene_look(result.scene, look_overrides)
+        groups = drawn[which]
         offset = np.zeros(3)
         phase = 0
         if count > 1:
@@ -221,13 +277,17 @@ def make_members(
                     [column - (columns - 1) / 2 + jitter[0], row + jitter[1], 0.4 * jitter[2]]
                 )
             )
-            phase = int(rng.integers(0, drawn[which].shape[0]))
+            phase = int(rng.integers(0, result.frames))
             if index >= len(results):
                 turn = 0.618034 * index % 1.0 * 0.25 - 0.125  # within an eighth of the wheel
                 look = replace(
                     look,
                     bell_color=_shift_hue(look.bell_color, turn),
                     tentacle_color=_shift_hue(look.tentacle_color, turn),
+                )
+                groups = tuple(
+                    replace(g, look=replace(g.look, color=_shift_hue(g.look.color, turn)))
+                    for g in groups
                 )
         has_bell = result.has(fields.BELL_SURFACE_VERTICES)
         has_fluid = fluid and result.has(fields.FLUID_POSITION)
@@ -238,7 +298,7 @@ def make_members(
                 offset=offset,
                 phase=phase,
                 look=look,
-                tentacles=drawn[which],
+                groups=groups,
                 bell_vertices=result.dataset(fields.BELL_SURFACE_VERTICES) if has_bell else None,
                 bell_faces=result.bell_surface_faces if has_bell else None,
                 fluid=result.dataset(fields.FLUID_POSITION) if has_fluid else None,
@@ -249,6 +309,25 @@ def make_members(
             )
         )
     return members
+
+
+def member_groups(result: Result, interpolation: int | None, look: Look) -> tuple[MemberGroup, ...]:
+    """A result's drawn tentacles group by group
+    (:func:`~jellysim.interpolation.interpolate_groups`), each with its look resolved from its
+    keys over ``look`` (:func:`~jellysim.render.materials.group_look`); none without
+    tentacles."""
+    from jellysim.interpolation import interpolate_groups
+
+    if not result.has(fields.TENTACLE_POSITION):
+        return ()
+    groups = []
+    first = 0
+    for drawn in interpolate_groups(result, interpolation):
+        groups.append(
+            MemberGroup(drawn.positions, group_look(look, drawn.tentacles, drawn.name), first)
+        )
+        first += drawn.positions.shape[1]
+    return tuple(groups)
 
 
 def _phase_shift(result: Result, phase: int) -> np.ndarray | None:
@@ -266,19 +345,19 @@ def _phase_shift(result: Result, phase: int) -> np.ndarray | None:
     return trend - trend[(np.arange(frames) + phase) % frames]
 
 
-def _extent(result: Result, drawn: np.ndarray, fluid: bool = True) -> float:
+def _extent(result: Result, groups: Sequence[MemberGroup], fluid: bool = True) -> float:
     """The largest extent (m) of one jellyfish (and its fluid, when drawn) in any one frame: its
     size, not how far it swims."""
     frames = result.frames
-    parts = [drawn.reshape(frames, -1, 3)]
+    parts = [g.positions.reshape(frames, -1, 3) for g in groups]
     if fluid and result.has(fields.FLUID_POSITION):
         parts.append(to_world(result.fluid_positions.astype(np.float64)))
     if result.has(fields.BELL_SURFACE_VERTICES):
         parts.append(result.bell_surface_vertices.astype(np.float64))
-    points = np.concatenate(parts, axis=1)
+    points = np.concatenate(parts, axis=1) if parts else np.empty((frames, 0, 3))
     if points.shape[1] == 0:
         return 1.0
-    return float(np.ptp(points, axis=1).max())
+    return float(np.nanmax(np.nanmax(points, axis=1) - np.nanmin(points, axis=1)))
 
 
 def frame_cameras(

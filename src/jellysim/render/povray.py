@@ -5,12 +5,13 @@ Swapping y and z maps one onto the other without mirroring the picture (:func:`v
 
 Looks (docs/rendering.md): the bell is a smooth ``mesh2`` with vertex normals, translucent
 mesoglea with a Fresnel-like rim (the ``aoi`` pattern) and radial stripes, at final quality
-glowing, refracting and holding a scattering medium; every tentacle is a tapered tube made of
-short cones with a sphere at each joint, all of a jellyfish's tentacles in one ``union`` (far
-faster to parse and trace than one ``sphere_sweep`` per tentacle); three lights after the
-paper's Fig. 12 (key, fill and back); the water a ground fog for the depth fade, with drifting
-marine snow and, at final quality, light shafts from above and depth of field; optionally the
-paper's room with a water tank.
+glowing, refracting and holding a scattering medium; tentacles group by group, each in its own
+look: a thread group's tentacles tapered tubes made of short cones with a sphere at each joint,
+in one ``union`` (far faster to parse and trace than one ``sphere_sweep`` per tentacle), a
+ribbon group's oral arms ruffled curtains in one ``mesh2``, hung from a manubrium (a cone);
+three lights after the paper's Fig. 12 (key, fill and back); the water a ground fog for the
+depth fade, with drifting marine snow and, at final quality, light shafts from above and depth
+of field; optionally the paper's room with a water tank.
 """
 
 from __future__ import annotations
@@ -21,15 +22,18 @@ import subprocess
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from jellysim.render.frame import (
     FLUID_COLOR,
     Camera,
+    DrawnTentacles,
     Frame,
     Jellyfish,
     Look,
+    ribbon_phase,
     tentacle_radii,
     vertex_normals,
 )
@@ -42,7 +46,11 @@ from jellysim.render.materials import (
     stripe_color,
     tentacle_face_color,
     tentacle_material,
+    thread_look,
 )
+
+if TYPE_CHECKING:
+    from jellysim.render.ribbons import RibbonMesh
 
 INCLUDE_DIRS = (
     "/usr/share/povray-3.7/include",
@@ -319,16 +327,32 @@ def bell_block(jelly: Jellyfish, quality: Quality) -> str:
     return "\n".join(line for line in lines if line) + "\n"
 
 
-def tentacles_block(jelly: Jellyfish, water: Iterable[float]) -> str:
-    """Every tentacle as a tapered tube: cones between particles, spheres at the joints. Slightly
-    translucent, faked: the tubes are opaque, their colour mixed ``look.tentacle_transparency``
-    of the way towards the deep water's face-on and pure at their edges (the ``aoi`` pattern),
-    as a clear tube in dark water looks. Traced transparency costs six times as much at 300
-    tentacles (docs/performance.md) and cannot be seen at 2 to 3 pixels a tentacle."""
-    tentacles = jelly.tentacles
+def tentacles_block(
+    jelly: Jellyfish, water: Iterable[float], quality: Quality | None = None
+) -> str:
+    """Every group of the jellyfish's drawn tentacles in its own look: threads through
+    :func:`threads_block`, ribbons (oral arms) through :func:`ribbons_block` (glowing at a
+    ``quality`` with glow)."""
+    glow = quality is not None and quality.glow
+    parts = []
+    for group in jelly.drawn():
+        if group.look.form == "ribbon":
+            parts.append(ribbons_block(jelly, group, glow))
+        else:
+            parts.append(threads_block(group.positions, thread_look(jelly.look, group.look), water))
+    return "".join(parts)
+
+
+def threads_block(tentacles: np.ndarray, look: Look, water: Iterable[float]) -> str:
+    """Tentacles (N, P, 3) m as tapered tubes in ``look``'s tentacle colour, radius and taper:
+    cones between particles, spheres at the joints, one ``union``. Slightly translucent, faked:
+    the tubes are opaque, their colour mixed ``look.tentacle_transparency`` of the way towards
+    the deep water's face-on and pure at their edges (the ``aoi`` pattern), as a clear tube in
+    dark water looks. Traced transparency costs six times as much at 300 tentacles
+    (docs/performance.md) and cannot be seen at 2 to 3 pixels a tentacle."""
     if tentacles.size == 0:
         return ""
-    radii = tentacle_radii(tentacles.shape[1], jelly.look)
+    radii = tentacle_radii(tentacles.shape[1], look)
     parts = ["union {"]
     for chain in tentacles:
         points = [vec(p) for p in chain]
@@ -338,7 +362,7 @@ def tentacles_block(jelly: Jellyfish, water: Iterable[float]) -> str:
                 parts.append(f"sphere{{{points[i]},{radii[i]:.4g}}}")
     # The deep water behind is the scene's (a school's first jellyfish's), not this one's.
     red, green, blue = (float(c) for c in water)
-    look = replace(jelly.look, water_color=(red, green, blue))
+    look = replace(look, water_color=(red, green, blue))
     clear = f"rgb {_rgb(tentacle_face_color(look))}"
     edge = f"rgb {_rgb(tentacle_material(look).base_color)}"
     parts.append(
@@ -348,6 +372,68 @@ def tentacles_block(jelly: Jellyfish, water: Iterable[float]) -> str:
     )
     parts.append("}")
     return "\n".join(parts) + "\n"
+
+
+def ribbons_block(jelly: Jellyfish, group: DrawnTentacles, glow: bool) -> str:
+    """A ribbon group (oral arms) as one ``mesh2`` of ruffled curtains in the group's colour and
+    the bell's tissue (:func:`jellysim.render.ribbons.povray_ribbons`)."""
+    from jellysim.render.ribbons import povray_ribbons
+
+    return povray_ribbons(arm_meshes(jelly, group), group.look.color, arm_tissue(jelly.look), glow)
+
+
+ARM_CLEARING = 0.5  # an oral arm is this fraction as transparent as the bell,
+ARM_RIM = 0.3  # with this rim: a thicker, frillier tissue that reads against the threads
+
+
+def arm_tissue(look: Look) -> Look:
+    """The oral arms' tissue: the bell's, ``ARM_CLEARING`` times as transparent, rim
+    ``ARM_RIM``, so that face-on an arm shows its colour through the veil of threads."""
+    return replace(look, bell_transparency=ARM_CLEARING * look.bell_transparency, rim=ARM_RIM)
+
+
+def arm_meshes(jelly: Jellyfish, group: DrawnTentacles) -> list[RibbonMesh]:
+    """The ruffled meshes of a ribbon group's arms: each one's width starting radially out from
+    the bell's axis (vertical through ``jelly.centre``; the arm's own root when there is none) at
+    its root, its ruffles shifted by :func:`ribbon_phase` of its drawn index."""
+    from jellysim.render.ribbons import ribbon_mesh
+
+    look = group.look
+    axis = jelly.centre
+    meshes = []
+    for row, chain in enumerate(group.positions):
+        outward = chain[0] - (chain[0] if axis is None else axis)
+        outward[2] = 0.0
+        meshes.append(
+            ribbon_mesh(
+                chain,
+                outward,
+                look.ribbon_width,
+                look.taper,
+                look.ruffles,
+                look.ruffle_depth,
+                phase=ribbon_phase(group.first + row),
+            )
+        )
+    return meshes
+
+
+def manubrium_block(jelly: Jellyfish, glow: bool) -> str:
+    """The manubrium: a cone in the bell's tissue and colour from the subumbrella's centre down
+    to the oral arms' roots (docs/rendering.md, "Oral arms")."""
+    stalk = jelly.manubrium
+    if stalk is None:
+        return ""
+    from jellysim.render.ribbons import ribbon_pigment
+
+    look = jelly.look
+    finish = "finish { ambient 0.1 diffuse 0.4 specular 0.3 roughness 0.01"
+    finish += f" emission {GLOW_EMISSION * look.glow:.3g} }}" if glow else " }"
+    return (
+        f"cone {{ {vec(stalk.top)}, {stalk.top_radius:.4g}, "
+        f"{vec(stalk.bottom)}, {stalk.bottom_radius:.4g}\n"
+        f"  texture {{ pigment {{ {ribbon_pigment(look.bell_color, look)} }} {finish} }}\n}}\n"
+    )
 
 
 def fluid_block(frame: Frame, style: str) -> str:
@@ -432,7 +518,8 @@ def scene_text(
                 parts.append(light_shafts_block(camera, look, water, seed))
     for jelly in frame.jellyfish:
         parts.append(bell_block(jelly, quality))
-        parts.append(tentacles_block(jelly, water))
+        parts.append(manubrium_block(jelly, quality.glow))
+        parts.append(tentacles_block(jelly, water, quality))
     parts.append(fluid_block(frame, fluid_style))
     return "".join(parts)
 

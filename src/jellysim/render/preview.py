@@ -22,6 +22,9 @@ Matplotlib ``PolyCollection``, sorted far to near by the distance of its centre 
   least ``MIN_HALF_WIDTH``), in the tentacle's face-on colour (``tentacle_transparency``), lit
   as thin cylinders: brightness ``TENTACLE_AMBIENT +
   (1 - TENTACLE_AMBIENT) sin a`` with ``a`` the angle between the segment and the key light.
+- Tentacle groups: each group in its own look (:func:`~jellysim.render.materials.group_look`);
+  a ribbon group's oral arms as the triangles of the meshes POV-Ray draws, shaded as the bell
+  (:func:`~jellysim.render.ribbons.ribbon_primitives`), the manubrium as a cone's triangles.
 - Fluid particles: translucent hexagons of radius ``fluid_radius`` projected (at least
   ``MIN_HALF_WIDTH``), in the water colour moved ``FLUID_TINT`` of the way to white.
 - Depth fade (exponential fog): a colour at distance ``d`` from the camera keeps the fraction
@@ -54,7 +57,15 @@ from matplotlib.figure import Figure
 from PIL import Image  # Pillow: a dependency of Matplotlib, which writes PNGs with it
 
 from jellysim.errors import InputError
-from jellysim.render.frame import Camera, Frame, Jellyfish, Look, tentacle_radii, vertex_normals
+from jellysim.render.frame import (
+    Camera,
+    DrawnTentacles,
+    Frame,
+    Jellyfish,
+    Look,
+    tentacle_radii,
+    vertex_normals,
+)
 from jellysim.render.materials import (
     STRIPE_TRANSMIT,
     bell_material,
@@ -63,6 +74,7 @@ from jellysim.render.materials import (
     stripe_color,
     stripe_weight,
     tentacle_face_color,
+    thread_look,
 )
 
 SUPERSAMPLING = {"draft": 1, "final": 3}  # quality name -> rasterised pixels per output pixel
@@ -155,7 +167,13 @@ def render_preview(
     parts = []
     for jellyfish in frame.jellyfish:
         parts.append(bell_primitives(jellyfish, view, near))
-        parts.append(tentacle_primitives(jellyfish, view, near, samples))
+        parts.append(manubrium_primitives(jellyfish, view, near))
+        for group in jellyfish.drawn():
+            if group.look.form == "ribbon":
+                parts.append(arm_primitives(jellyfish, group, view, near))
+            else:
+                look = thread_look(jellyfish.look, group.look)
+                parts.append(tentacle_primitives(group.positions, look, view, near, samples))
     if frame.fluid is not None and len(frame.fluid):
         parts.append(fluid_primitives(frame.fluid, frame.fluid_radius, water, view, near, samples))
     drawn = fog(merge(parts), row_colors, fog_front, fog_length)
@@ -181,7 +199,8 @@ def scene_extent(frame: Frame, view: View) -> float:
     camera; 0 if there are none."""
     clouds = []
     for jellyfish in frame.jellyfish:
-        clouds.append(np.asarray(jellyfish.tentacles, dtype=np.float64).reshape(-1, 3))
+        for group in jellyfish.drawn():
+            clouds.append(np.asarray(group.positions, dtype=np.float64).reshape(-1, 3))
         if jellyfish.bell_vertices is not None:
             clouds.append(np.asarray(jellyfish.bell_vertices, dtype=np.float64).reshape(-1, 3))
     points = np.concatenate(clouds) if clouds else np.empty((0, 3))
@@ -257,14 +276,17 @@ def bell_shading(
     return color, 1.0 - clear
 
 
-def tentacle_primitives(jellyfish: Jellyfish, view: View, near: float, samples: int) -> Primitives:
-    """One quadrilateral per tentacle segment; the ribbon's edges at each particle are offset
-    along the normal of the on-screen tangent (central differences) by the projected radius."""
-    points = np.asarray(jellyfish.tentacles, dtype=np.float64)
+def tentacle_primitives(
+    tentacles: np.ndarray, look: Look, view: View, near: float, samples: int
+) -> Primitives:
+    """One quadrilateral per segment of the tentacles (N, P, 3) m, drawn in ``look``'s tentacle
+    colour, radius and taper; the ribbon's edges at each particle are offset along the normal
+    of the on-screen tangent (central differences) by the projected radius."""
+    points = np.asarray(tentacles, dtype=np.float64)
     if points.ndim != 3 or points.shape[0] == 0 or points.shape[1] < 2:
         return empty_primitives()
     pixels, depth = project(points, view)  # (N, P, 2), (N, P)
-    radii = tentacle_radii(points.shape[1], jellyfish.look)  # (P,) m
+    radii = tentacle_radii(points.shape[1], look)  # (P,) m
     half_width = np.maximum(
         radii * view.focal / np.where(depth > near, depth, near), MIN_HALF_WIDTH * samples
     )
@@ -291,13 +313,53 @@ def tentacle_primitives(jellyfish: Jellyfish, view: View, near: float, samples: 
     sine = np.sqrt(np.clip(1.0 - cosine**2, 0.0, 1.0))
     brightness = TENTACLE_AMBIENT + (1.0 - TENTACLE_AMBIENT) * sine
     # A ribbon faces the camera: the tentacle's face-on colour (as POV-Ray's tubes show it).
-    rgb = np.asarray(tentacle_face_color(jellyfish.look)) * brightness[:, None]
+    rgb = np.asarray(tentacle_face_color(look)) * brightness[:, None]
     count = len(rgb)
     return Primitives(
         corners=corners[keep],
         rgba=np.column_stack([rgb, np.ones(count)]),
         distance=np.linalg.norm(middle - view.location, axis=1),
     )
+
+
+def arm_primitives(
+    jellyfish: Jellyfish, group: DrawnTentacles, view: View, near: float
+) -> Primitives:
+    """A ribbon group's ruffled arms as triangles in the group's colour and the bell's tissue
+    (the meshes POV-Ray draws, :func:`jellysim.render.povray.arm_meshes`)."""
+    from jellysim.render.povray import arm_meshes, arm_tissue
+    from jellysim.render.ribbons import ribbon_primitives
+
+    meshes = arm_meshes(jellyfish, group)
+    return ribbon_primitives(meshes, group.look.color, arm_tissue(jellyfish.look), view, near)
+
+
+MANUBRIUM_SIDES = 16  # sides of the manubrium's cone in the preview
+
+
+def manubrium_primitives(jellyfish: Jellyfish, view: View, near: float) -> Primitives:
+    """The manubrium as the side of a ``MANUBRIUM_SIDES``-sided cone in the bell's colour and
+    tissue, shaded as a ribbon is."""
+    stalk = jellyfish.manubrium
+    if stalk is None:
+        return empty_primitives()
+    from jellysim.render.ribbons import RibbonMesh, ribbon_primitives
+
+    angle = 2.0 * np.pi * np.arange(MANUBRIUM_SIDES) / MANUBRIUM_SIDES
+    ring = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    vertices = np.concatenate(
+        [stalk.top + stalk.top_radius * ring, stalk.bottom + stalk.bottom_radius * ring]
+    )
+    i = np.arange(MANUBRIUM_SIDES)
+    j = (i + 1) % MANUBRIUM_SIDES
+    faces = np.concatenate(
+        [
+            np.stack([i, j, j + MANUBRIUM_SIDES], 1),
+            np.stack([i, j + MANUBRIUM_SIDES, i + MANUBRIUM_SIDES], 1),
+        ]
+    )
+    mesh = RibbonMesh(vertices, faces, np.concatenate([ring, ring]))
+    return ribbon_primitives([mesh], jellyfish.look.bell_color, jellyfish.look, view, near)
 
 
 def fluid_primitives(
