@@ -17,7 +17,7 @@ In a scene of several groups the part of group NAME is ``tentacles_NAME``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -66,19 +66,14 @@ class ExportGroup:
     ruffles: float
     ruffle_depth: float
     centres: np.ndarray
-    _meshes: dict[int, ArmsMesh] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def ribbon(self) -> bool:
         return self.form == "ribbon"
 
     def ribbon_meshes(self, frame: int) -> ArmsMesh:
-        """Every arm of a ribbon group at ``frame`` as one mesh, built once per frame."""
-        if frame not in self._meshes:
-            self._meshes[frame] = self._ribbon_meshes(frame)
-        return self._meshes[frame]
-
-    def _ribbon_meshes(self, frame: int) -> ArmsMesh:
+        """Every arm of a ribbon group at ``frame`` as one mesh (built on each call, a few ms,
+        so that a long export holds no frame's ribbons but the one it writes)."""
         from jellysim.render.ribbons import ribbon_mesh
 
         vertices, faces, normals, arm = [], [], [], []
