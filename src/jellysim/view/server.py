@@ -172,7 +172,8 @@ class ResultData:
 
     Reads the file on each request (h5py serialises access between the server's threads); the
     drawn tentacles come from :func:`jellysim.interpolation.interpolate_result` for the frames
-    asked for, the interpolation factor chosen by the page.
+    asked for, the interpolation factor chosen by the page, or in a scene of several groups (or
+    a ribbon group) from :func:`~jellysim.interpolation.interpolate_groups`, group by group.
     """
 
     def __init__(self, result: Result) -> None:
