@@ -26,7 +26,7 @@ import jellysim
 from jellysim import fields
 from jellysim.cli.main import main
 from jellysim.errors import InputError
-from jellysim.interpolation import interpolate_result
+from jellysim.interpolation import interpolate_groups, interpolate_result
 from jellysim.render.pipeline import scene_look
 from jellysim.view import find_web_modules
 from jellysim.view.server import TOKEN_HEADER, WEB_MODULES_ENV, ViewLimits, ViewServer
@@ -71,6 +71,28 @@ def fluid(tmp_path_factory: pytest.TempPathFactory) -> Path:
         f.attrs["frames_expected"] = FLUID_FRAMES
         f.attrs["particle_spacing"] = 0.01
     return folder
+
+
+ARMS_COLOR = (0.0, 0.8, 0.1)  # purple-jelly's oral arms set to a green nothing else has
+
+
+@pytest.fixture(scope="module")
+def purple(tmp_path_factory: pytest.TempPathFactory) -> Iterator[jellysim.Result]:
+    """Two tentacle groups: eight marginal threads and four oral arms drawn as ribbons."""
+    folder = tmp_path_factory.mktemp("purple")
+    result = jellysim.run(
+        "purple-jelly",
+        folder,
+        overrides={"duration": 0.3, "fps": 10.0, "tentacles.oral_arms.color": list(ARMS_COLOR)},
+    )
+    yield result
+    result.close()
+
+
+@pytest.fixture(scope="module")
+def purple_view(purple: jellysim.Result) -> Iterator[ViewServer]:
+    with serving(purple.folder) as server:
+        yield server
 
 
 @pytest.fixture(scope="module")
@@ -167,6 +189,34 @@ def test_tentacle_chunks_are_the_drawn_tentacles(
     # The simulated tentacles are among them, as simulated.
     every = count // 6
     np.testing.assert_allclose(chunk[:, ::every], brown.tentacle_positions[12:13], atol=1e-6)
+
+
+def test_groups_are_described_and_sent_each_of_its_own_length(
+    purple: jellysim.Result, purple_view: ViewServer
+) -> None:
+    """meta.json lists the groups; a tentacle frame holds the marginal threads interpolated
+    (their own 41 particles) then the four arms as simulated (their own 21), no NaN."""
+    meta = json.loads(get(purple_view, "/meta.json"))["tentacles"]
+    groups = meta["groups"]
+    assert [(g["name"], g["form"], g["particles"], g["simulated"]) for g in groups] == [
+        ("marginal", "thread", 41, 8),
+        ("oral_arms", "ribbon", 21, 4),
+    ]
+    assert groups[1]["color"] == list(ARMS_COLOR)
+    assert groups[0]["color"] == list(purple.scene.groups[0].tentacles.color)
+    assert groups[1]["width"] == purple.scene.groups[1].tentacles.ribbon_width
+    assert meta["interpolation"] == 10  # the thread group's own
+    factor, count = 3, purple.frames
+    body = get(purple_view, f"/frames?part=tentacles&start=0&count={count}&interpolation={factor}")
+    threads, arms = 8 * factor * 41 * 3, 4 * 21 * 3
+    data = floats(body, count, threads + arms)
+    assert np.isfinite(data).all()
+    drawn = interpolate_groups(purple, factor)
+    np.testing.assert_allclose(
+        data[:, :threads], drawn[0].positions.reshape(count, -1), rtol=0, atol=1e-6
+    )
+    simulated = purple.read(fields.TENTACLE_POSITION)[:, 8:12, :21]
+    np.testing.assert_allclose(data[:, threads:], simulated.reshape(count, -1), atol=1e-6)
 
 
 def test_fluid_chunks_are_world_points_with_dead_particles_nan(
@@ -376,6 +426,36 @@ def test_the_page_plays_in_headless_chromium(
         assert max(sizes) <= small.max_response_bytes, (part, sizes)
     largest = max(frame_bytes, key=frame_bytes.__getitem__)
     assert len(pieced["answers"][largest]) >= 4, pieced["answers"]
+
+
+def test_the_page_draws_each_group_in_its_colour(
+    purple: jellysim.Result, purple_view: ViewServer, tmp_path: Path
+) -> None:
+    """The purple jelly plays in headless Chromium (view_e2e.mjs's checks, the drawn count by
+    group), and its screenshot shows the arms' green, which nothing else in the picture has."""
+    from PIL import Image
+
+    tools = _browser_tools()
+    if tools is None:
+        if os.environ.get("CI"):
+            pytest.fail("the viewer test needs node, web/node_modules and chromium (make test)")
+        pytest.skip("node, web/node_modules (make web) or chromium (make chromium) missing")
+    node, modules = tools
+    script = Path(__file__).with_name("view_e2e.mjs")
+    done = subprocess.run(
+        [node, str(script), str(modules), CHROMIUM, str(tmp_path), purple_view.page_url],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    (page,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    # 8 x 10 threads and 4 arms, then 8 x 3 threads and the same 4 arms.
+    assert page["drawnTentacles"] == [8 * 10 + 4, 8 * 3 + 4]
+    pixels = np.asarray(Image.open(page["screenshot"]).convert("RGB")).astype(np.int64)
+    r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
+    green = (g > 60) & (g > 2 * r) & (g > 2 * b)
+    assert green.sum() > 200, green.sum()
 
 
 def _hold_a_slot(server: ViewServer) -> None:

@@ -110,14 +110,26 @@ async function check(browser, url, index) {
   assert.ok(observed.pixelsChanged, `frames ${shown} and ${target} look the same`);
 
   if (meta.tentacles.present) {
-    const simulated = meta.tentacles.simulated;
-    assert.equal(await hook(page, "drawnTentacles"), simulated * meta.tentacles.interpolation);
+    // Drawn at `factor` per simulated tentacle; by group as data.js's drawnCount says (written
+    // out again here: ribbons as simulated, rings T N, clusters of m (m - 1) N + 1 each).
+    const drawn = (factor) =>
+      (meta.tentacles.groups ?? [{ form: "thread", clusters: [meta.tentacles.simulated] }]).reduce(
+        (sum, g) =>
+          sum +
+          (g.form === "ribbon"
+            ? g.simulated
+            : g.clusters.length === 1
+              ? g.clusters[0] * factor
+              : g.clusters.reduce((s, m) => s + (m - 1) * factor + 1, 0)),
+        0,
+      );
+    assert.equal(await hook(page, "drawnTentacles"), drawn(meta.tentacles.interpolation));
     const factor = meta.tentacles.interpolation === 3 ? 2 : 3;
     await page.locator("#interpolation").fill(String(factor));
-    await page.waitForFunction((n) => window.jellysimView.drawnTentacles === n, simulated * factor, {
+    await page.waitForFunction((n) => window.jellysimView.drawnTentacles === n, drawn(factor), {
       timeout: TIMEOUT,
     });
-    observed.drawnTentacles = [simulated * meta.tentacles.interpolation, simulated * factor];
+    observed.drawnTentacles = [drawn(meta.tentacles.interpolation), drawn(factor)];
   }
 
   if (meta.fluid.present) {

@@ -8,7 +8,8 @@ does the geometry)::
 
 or open it in Blender's text editor and press Run Script (it imports the stage next to it). It
 imports the stage (``bpy.ops.wm.usd_import``), gives the bell a translucent glowing material and
-the tentacles and fluid theirs in the scene's ``[look]`` colours, colours the world as the water,
+the tentacles and fluid theirs in the scene's ``[look]`` colours (each tentacle group of a scene
+of several in its own colour), colours the world as the water,
 adds a camera framing the whole animation and a key and a fill light, and sets the frame range,
 frame step, fps and resolution from the stage.
 
@@ -52,6 +53,12 @@ def settings_from_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
     for key in INTEGERS:
         settings[key] = int(metadata[key])
     settings["stage_file"] = str(metadata["stage_file"])
+    # A scene of several tentacle groups: each group's prim name and colour (flat, 3 a group).
+    prims = [str(name) for name in metadata.get("group_prims", ())]
+    colors = [float(v) for v in metadata.get("group_colors", ())]
+    if len(colors) != 3 * len(prims):
+        raise ValueError("the stage's jellysim metadata has group_colors unlike its group_prims")
+    settings["group_colors"] = {name: colors[3 * k : 3 * k + 3] for k, name in enumerate(prims)}
     return settings
 
 
@@ -157,10 +164,11 @@ def light_rig(low: list[float], high: list[float]) -> list[dict[str, Any]]:
 
 
 def material_parameters(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """Principled BSDF inputs per imported prim (Bell, Tentacles, Fluid) and the world colour,
-    from the shared materials of the scene's [look] as the other exports use them."""
+    """Principled BSDF inputs per imported prim (Bell, Tentacles, each tentacle group's prim,
+    Fluid) and the world colour, from the shared materials of the scene's [look] as the other
+    exports use them."""
     bell = settings["bell_color"]
-    return {
+    parameters = {
         "Bell": {
             "base_color": [*bell, 1.0],
             "alpha": 1.0 - settings["bell_transparency"],
@@ -190,6 +198,9 @@ def material_parameters(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
         },
         "World": {"color": [*settings["water_color"], 1.0], "strength": 1.0},
     }
+    for name, color in settings.get("group_colors", {}).items():
+        parameters[name] = {**parameters["Tentacles"], "base_color": [*color, 1.0]}
+    return parameters
 
 
 def render_settings(
@@ -267,13 +278,15 @@ def main(argv: list[str] | None = None) -> None:
     imported = [o for o in bpy.data.objects if o not in before]
 
     parameters = material_parameters(settings)
+    # Longest first: a group's prim "Tentacles_arms" before "Tentacles".
+    prims = sorted((n for n in parameters if n != "World"), key=len, reverse=True)
     for obj in imported:
-        name = next((n for n in ("Bell", "Tentacles", "Fluid") if obj.name.startswith(n)), None)
+        name = next((n for n in prims if obj.name.startswith(n)), None)
         if name is None or not hasattr(obj.data, "materials"):
             continue
         obj.data.materials.clear()
         obj.data.materials.append(_material(name, parameters[name]))
-        if name == "Tentacles" and obj.type == "CURVE" and obj.data.splines:
+        if name.startswith("Tentacles") and obj.type == "CURVE" and obj.data.splines:
             first = obj.data.splines[0].points[0].radius
             obj.data.bevel_depth = curve_bevel_depth(first, settings["tentacle_radius"])
             obj.data.bevel_resolution = 2

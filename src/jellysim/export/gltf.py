@@ -16,22 +16,26 @@ keyframe (data growing as frames squared) and three.js and Blender slow down wit
 targets. The animation data stays linear in the frame count: each frame node has at most three
 keyframes. Without playing the animation a viewer shows the part's first frame only.
 
-Each frame's mesh has up to three primitives, as the result has them:
+Each frame's mesh has a primitive per part, as the result has them:
 
 - the bell's surface triangles (``bell/surface_vertices``, ``bell/surface_faces``) with smooth
   vertex normals; translucent material (alphaMode BLEND);
-- every drawn (interpolated) tentacle as a closed tapered tube: ``TUBE_SIDES`` vertices per
-  particle around the polyline, radii from the scene's ``[look]`` (as the renderers draw them),
-  and a cap at the root and at the tip. Tubes rather than LINES primitives because lines are one
-  pixel wide in WebGL and Blender imports them as bare edges that do not render;
+- per tentacle group (:mod:`jellysim.export.groups`), in the group's own material named after
+  it (``tentacles`` in a one-group scene, ``tentacles_NAME`` otherwise): a thread group's drawn
+  (interpolated) tentacles as closed tapered tubes, ``TUBE_SIDES`` vertices per particle around
+  the polyline, radii from the group's look (as the renderers draw them), and a cap at the root
+  and at the tip (tubes rather than LINES primitives because lines are one pixel wide in WebGL
+  and Blender imports them as bare edges that do not render); a ribbon group's arms as their
+  ruffled ribbon triangles with vertex normals (double-sided material);
 - a fluid's live particles as POINTS (what viewers draw of them varies: a pixel in three.js,
   loose vertices in Blender).
 
 Materials (pbrMetallicRoughness, linear RGB) are the shared ones of
 :mod:`jellysim.render.materials`, as every renderer and export uses them: the bell double-sided
 with base alpha ``1 - bell_transparency`` (alphaMode BLEND) and emission ``GLOW_EMISSION glow``
-times its colour; the tentacles opaque; the fluid ``FLUID_COLOR``. The bell's rim and stripes
-are view-dependent shading glTF's core materials cannot express (docs/rendering.md).
+times its colour; each tentacle group opaque in its colour; the fluid ``FLUID_COLOR``. The bell's
+rim and stripes are view-dependent shading glTF's core materials cannot express
+(docs/rendering.md).
 
 Long animations are split into parts so that no file nears GLB's 4 GiB (uint32) length limit or
 a viewer's memory: ``<name>_part000.glb``, ``<name>_part001.glb``, ... each hold a contiguous run
@@ -56,17 +60,14 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.errors import JellysimError
+from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
-from jellysim.render.materials import (
-    Material,
-    bell_material,
-    fluid_material,
-    tentacle_material,
-)
+from jellysim.render.materials import Material, bell_material, fluid_material
 
 PART_BUDGET_BYTES = 256 * 2**20  # most bytes of one .glb part (more only for a single frame)
 TUBE_SIDES = 6  # vertices around a tentacle's tube at each particle
 JSON_BYTES_PER_FRAME = 4096  # an upper bound of the JSON one frame adds to a part (tested)
+JSON_BYTES_PER_GROUP = 1024  # and of what each tentacle group beyond the first adds to that
 JSON_BYTES_FIXED = 8192  # an upper bound of the JSON a part holds besides its frames
 GLB_LIMIT = 2**32 - 1  # GLB stores lengths as uint32
 
@@ -236,8 +237,7 @@ class _Source:
     name: str
     bell_vertices: Any  # h5py dataset (F, V, 3) m, or None
     bell_faces: np.ndarray | None  # (M, 3) int
-    tentacles: np.ndarray | None  # (F, N, P, 3) m, drawn
-    radii: np.ndarray | None  # (P,) m
+    groups: list[ExportGroup]  # the tentacle groups, drawn
     fluid_position: Any  # h5py dataset (F, K, D) m, or None
     fluid_alive: np.ndarray | None  # (F, K) bool
     look: Any  # jellysim.render.frame.Look
@@ -248,9 +248,14 @@ class _Source:
         total = 3 * 4 + 3 * vec3  # at most three keyframes: times and scales
         if self.bell_vertices is not None:
             total += 2 * vec3 * self.bell_vertices.shape[1]
-        if self.tentacles is not None:
-            count, particles = self.tentacles.shape[1:3]
-            total += 2 * vec3 * count * (particles * TUBE_SIDES + 2)
+        for group in self.groups:
+            if group.ribbon:
+                arms = group.ribbon_meshes(frame)
+                total += 2 * vec3 * len(arms.vertices)
+                total += len(_padded(_indices(arms.faces).tobytes()))
+            else:
+                count, particles = group.positions.shape[1:3]
+                total += 2 * vec3 * count * (particles * TUBE_SIDES + 2)
         if self.fluid_alive is not None:
             total += vec3 * int(self.fluid_alive[frame].sum())
         return total
@@ -260,24 +265,22 @@ class _Source:
         total = 0
         if self.bell_faces is not None:
             total += len(_padded(_indices(self.bell_faces).tobytes()))
-        if self.tentacles is not None:
-            count, particles = self.tentacles.shape[1:3]
-            total += len(_padded(_indices(tube_faces(count, particles)).tobytes()))
+        for group in self.groups:
+            if not group.ribbon:
+                count, particles = group.positions.shape[1:3]
+                total += len(_padded(_indices(tube_faces(count, particles)).tobytes()))
         return total
+
+    def json_bytes_per_frame(self) -> int:
+        """An upper bound of the JSON one frame adds to a part."""
+        return JSON_BYTES_PER_FRAME + JSON_BYTES_PER_GROUP * max(len(self.groups) - 1, 0)
 
 
 def _read(result: Result, interpolation: int | None) -> _Source:
-    from jellysim.render.frame import tentacle_radii
     from jellysim.render.pipeline import scene_look
 
     scene = result.scene
     look = scene_look(scene)
-    tentacles = radii = None
-    if result.has(fields.TENTACLE_POSITION):
-        from jellysim.interpolation import interpolate_result
-
-        tentacles = interpolate_result(result, interpolation)
-        radii = tentacle_radii(tentacles.shape[2], look)
     has_bell = result.has(fields.BELL_SURFACE_VERTICES) and result.has(fields.BELL_SURFACE_FACES)
     fluid = result.dataset(fields.FLUID_POSITION) if result.has(fields.FLUID_POSITION) else None
     alive = None
@@ -292,8 +295,7 @@ def _read(result: Result, interpolation: int | None) -> _Source:
         name=scene.name,
         bell_vertices=result.dataset(fields.BELL_SURFACE_VERTICES) if has_bell else None,
         bell_faces=result.bell_surface_faces.astype(np.int64) if has_bell else None,
-        tentacles=tentacles,
-        radii=radii,
+        groups=export_groups(result, look, interpolation),
         fluid_position=fluid,
         fluid_alive=alive,
         look=look,
@@ -307,7 +309,7 @@ def _plan_parts(source: _Source, frames: range, budget: int) -> list[range]:
     parts: list[range] = []
     start, size = 0, fixed
     for k, frame in enumerate(frames):
-        extra = source.frame_bytes(frame) + JSON_BYTES_PER_FRAME
+        extra = source.frame_bytes(frame) + source.json_bytes_per_frame()
         if k > start and size + extra > budget:
             parts.append(frames[start:k])
             start, size = k, fixed
@@ -373,12 +375,16 @@ def _build_part(
             )
         )
         shared["bell"] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
-    if source.tentacles is not None:
-        count, particles = source.tentacles.shape[1:3]
+    for group in source.groups:
+        if group.ribbon:
+            materials.append(_material(group.material, doubleSided=True))
+            shared[group.part] = (-1, len(materials) - 1)  # indices per frame
+            continue
+        count, particles = group.positions.shape[1:3]
         indices = _indices(tube_faces(count, particles))
         view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
-        materials.append(_material(tentacle_material(look)))
-        shared["tentacles"] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
+        materials.append(_material(group.material))
+        shared[group.part] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
     if source.fluid_position is not None:
         materials.append(_material(fluid_material()))
         shared["fluid"] = (-1, len(materials) - 1)
@@ -396,10 +402,17 @@ def _build_part(
             vertices = np.asarray(source.bell_vertices[frame], dtype=np.float64)
             arrays.append(("bell", to_y_up(vertices)))
             arrays.append(("bell-normal", to_y_up(_bell_normals(vertices, source.bell_faces))))
-        if source.tentacles is not None and source.radii is not None:
-            positions, normals = tube_vertices(source.tentacles[frame], source.radii)
-            arrays.append(("tentacles", to_y_up(positions)))
-            arrays.append(("tentacles-normal", to_y_up(normals)))
+        ribbon_faces: dict[str, np.ndarray] = {}
+        for group in source.groups:
+            if group.ribbon:
+                positions, faces, normals, _ = group.ribbon_meshes(frame)
+                if not len(faces):
+                    continue
+                ribbon_faces[group.part] = faces
+            else:
+                positions, normals = tube_vertices(group.positions[frame], group.radii)
+            arrays.append((group.part, to_y_up(positions)))
+            arrays.append((f"{group.part}-normal", to_y_up(normals)))
         if source.fluid_position is not None and source.fluid_alive is not None:
             alive = source.fluid_alive[frame]
             if alive.any():
@@ -417,10 +430,14 @@ def _build_part(
                 )
                 offset += array.nbytes
             primitives = []
-            for name in ("bell", "tentacles", "fluid"):
+            for name in ("bell", *(group.part for group in source.groups), "fluid"):
                 if name not in accessors:
                     continue
                 indices_accessor, material = shared[name]
+                if name in ribbon_faces:
+                    indices = _indices(ribbon_faces[name])
+                    indices_view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
+                    indices_accessor = built.accessor(indices_view, 0, indices, "SCALAR")
                 attributes = {"POSITION": accessors[name]}
                 primitive: dict[str, Any] = {"attributes": attributes, "material": material}
                 if name == "fluid":

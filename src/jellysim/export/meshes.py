@@ -1,11 +1,16 @@
 """Frame sequences for tools that read plain meshes: Wavefront OBJ and binary PLY.
 
 - ``obj``: ``frame_NNNNN.obj`` per frame: object ``bell`` (its vertices and triangles, counter-
-  clockwise seen from outside) and object ``tentacles`` (every drawn tentacle as one polyline,
-  ``l`` elements). Blender, Houdini and most 3-D tools import OBJ sequences.
+  clockwise seen from outside) and an object per tentacle group (:mod:`jellysim.export.groups`):
+  ``tentacles`` in a one-group scene; in a scene of several, ``tentacles_NAME`` holding the
+  group ``g NAME`` in the material ``tentacles_NAME`` of ``materials.mtl`` (the group's colour,
+  the bell's too). A thread group's drawn tentacles are polylines (``l`` elements, each of the
+  group's own particle count), a ribbon group's arms triangles with vertex normals (``vn``).
+  Blender, Houdini and most 3-D tools import OBJ sequences.
 - ``ply``: ``frame_NNNNN.ply`` per frame (binary): for a fluid, the live particles as a point
   cloud with ``pressure``, ``velocity`` (vx, vy, vz) and ``kind``; otherwise the bell's triangles
-  and every drawn tentacle's particles, with ``part`` (0 bell, 1 tentacle) per point.
+  and every drawn tentacle's particles (each of its group's own count), with ``part`` (0 bell,
+  1 tentacle) per point.
 """
 
 from __future__ import annotations
@@ -15,15 +20,17 @@ from pathlib import Path
 import numpy as np
 
 from jellysim import fields
+from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
+from jellysim.render.materials import Material, bell_material
+
+MATERIALS = "materials.mtl"  # the materials of a scene of several tentacle groups
 
 
-def _drawn(result: Result, interpolation: int | None) -> np.ndarray | None:
-    if not result.has(fields.TENTACLE_POSITION):
-        return None
-    from jellysim.interpolation import interpolate_result
+def _groups(result: Result, interpolation: int | None) -> list[ExportGroup]:
+    from jellysim.render.pipeline import scene_look
 
-    return interpolate_result(result, interpolation)
+    return export_groups(result, scene_look(result.scene), interpolation)
 
 
 def _bell(result: Result, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
@@ -35,28 +42,67 @@ def _bell(result: Result, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
     )
 
 
+def write_mtl(path: Path, materials: list[Material]) -> None:
+    """``materials`` as a Wavefront MTL file (diffuse ``Kd`` linear RGB, dissolve ``d``)."""
+    lines = ["# jellysim materials (linear RGB)"]
+    for material in materials:
+        lines += [
+            f"newmtl {material.name}",
+            "Kd {:.6g} {:.6g} {:.6g}".format(*material.base_color),
+            f"d {material.opacity:.6g}",
+        ]
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text("\n".join(lines) + "\n", encoding="ascii")
+    temporary.replace(path)
+
+
 def write_obj(
     path: Path,
     time: float,
     bell: tuple[np.ndarray, np.ndarray] | None,
-    tentacles: np.ndarray | None,
+    groups: list[ExportGroup],
+    frame: int,
+    materials: str | None = None,
 ) -> None:
-    """One frame as an OBJ file (1-based indices; written to a temporary name, then renamed)."""
+    """Frame ``frame`` as an OBJ file (1-based indices; written to a temporary name, then
+    renamed). ``materials``: the MTL file the objects' ``usemtl`` names (None: none named)."""
     lines = [f"# jellysim frame at t = {time:.9g} s (m, z up)"]
-    offset = 1
+    if materials is not None:
+        lines.append(f"mtllib {materials}")
+    offset = normal_offset = 1
     if bell is not None:
         vertices, faces = bell
         lines.append("o bell")
+        if materials is not None:
+            lines.append("usemtl bell")
         lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in vertices]
         lines += [f"f {a + offset} {b + offset} {c + offset}" for a, b, c in faces]
         offset += len(vertices)
-    if tentacles is not None and tentacles.size:
+    for group in groups:
+        tentacles = group.positions[frame]
+        if not tentacles.size:
+            continue
+        lines.append(f"o {group.part}")
+        if materials is not None:
+            lines += [f"g {group.name}", f"usemtl {group.material.name}"]
+        if group.ribbon:
+            vertices, faces, normals, _ = group.ribbon_meshes(frame)
+            lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in vertices]
+            lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in normals]
+            lines += [
+                f"f {a + offset}//{a + normal_offset} {b + offset}//{b + normal_offset} "
+                f"{c + offset}//{c + normal_offset}"
+                for a, b, c in faces
+            ]
+            offset += len(vertices)
+            normal_offset += len(normals)
+            continue
         count, particles, _ = tentacles.shape
-        lines.append("o tentacles")
         lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in tentacles.reshape(-1, 3)]
         for k in range(count):
             first = offset + k * particles
             lines.append("l " + " ".join(str(first + i) for i in range(particles)))
+        offset += count * particles
     temporary = path.with_name(path.name + ".tmp")
     temporary.write_text("\n".join(lines) + "\n", encoding="ascii")
     temporary.replace(path)
@@ -65,14 +111,21 @@ def write_obj(
 def export_obj(
     result: Result, out: Path, frames: range, interpolation: int | None = None
 ) -> list[Path]:
-    drawn = _drawn(result, interpolation)
+    groups = _groups(result, interpolation)
+    materials = None
+    if len(groups) > 1:
+        from jellysim.render.pipeline import scene_look
+
+        materials = MATERIALS
+        write_mtl(
+            out / MATERIALS,
+            [bell_material(scene_look(result.scene)), *(group.material for group in groups)],
+        )
     times = result.time
     paths = []
     for frame in frames:
         path = out / f"frame_{frame:05d}.obj"
-        write_obj(
-            path, float(times[frame]), _bell(result, frame), None if drawn is None else drawn[frame]
-        )
+        write_obj(path, float(times[frame]), _bell(result, frame), groups, frame, materials)
         paths.append(path)
     return paths[:1]
 
@@ -82,7 +135,7 @@ def export_ply(
 ) -> list[Path]:
     import meshio
 
-    drawn = _drawn(result, interpolation)
+    groups = _groups(result, interpolation)
     # The particle kinds of a fluid, read once (None: no fluid, the bell and tentacles instead).
     kind = result.fluid_kind.astype(np.int32) if result.has(fields.FLUID_POSITION) else None
     paths = []
@@ -107,8 +160,8 @@ def export_ply(
                 parts.append(bell[0])
                 cells.append(("triangle", bell[1].astype(np.int32)))
                 part_ids.append(np.zeros(len(bell[0]), dtype=np.int32))
-            if drawn is not None:
-                parts.append(drawn[frame].reshape(-1, 3))
+            for group in groups:
+                parts.append(group.positions[frame].reshape(-1, 3))
                 part_ids.append(np.ones(parts[-1].shape[0], dtype=np.int32))
             mesh = meshio.Mesh(
                 np.concatenate(parts), cells, point_data={"part": np.concatenate(part_ids)}

@@ -10,7 +10,13 @@ shared materials of :mod:`jellysim.render.materials`: ``diffuseColor``, ``opacit
 - ``Bell``: a ``Mesh`` (triangles, counter-clockwise seen from outside, right-handed) with
   time-sampled ``points`` and ``extent``;
 - ``Tentacles``: ``BasisCurves`` (linear), one curve per drawn tentacle, time-sampled ``points``
-  and ``extent``, ``widths`` per vertex tapering from root to tip (the scene's ``[look]``);
+  and ``extent``, ``widths`` per vertex tapering from root to tip (the scene's ``[look]``). A
+  scene of several tentacle groups (:mod:`jellysim.export.groups`) has a prim per group
+  instead, ``Tentacles_NAME`` (``-`` in NAME written ``_``) with its own material of the
+  group's colour: a thread group as above (its own particle count, radius and taper), a ribbon
+  group (oral arms) a ``Mesh`` of its ruffled ribbons' triangles with time-sampled ``points``,
+  ``normals`` (vertex) and, since the triangle count may change, ``faceVertexCounts`` and
+  ``faceVertexIndices``, double-sided;
 - ``Fluid``: ``Points``, the live fluid particles per time sample, constant width l0.
 
 The root layer's ``customLayerData["jellysim"]`` holds what a renderer needs besides geometry:
@@ -23,12 +29,14 @@ settings embedded) sets the stage up in Blender: materials, world, camera, light
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from jellysim import fields
+from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
 from jellysim.render.materials import Material, bell_material, fluid_material, tentacle_material
 
@@ -50,6 +58,12 @@ def _to_3d(points: np.ndarray) -> np.ndarray:
 BLENDER_SCRIPT = "import_into_blender.py"
 
 
+def prim_name(part: str) -> str:
+    """The USD prim (and material) name of an exported part: ``bell`` -> ``Bell``,
+    ``tentacles_oral-arms`` -> ``Tentacles_oral_arms`` (USD names take no ``-``)."""
+    return part[:1].upper() + part[1:].replace("-", "_")
+
+
 def _bounds(low: np.ndarray, high: np.ndarray, box: list[tuple[float, float, float]]) -> None:
     """Grow ``low`` and ``high`` (3,) in place to hold ``box`` (an extent)."""
     np.minimum(low, box[0], out=low)
@@ -57,9 +71,16 @@ def _bounds(low: np.ndarray, high: np.ndarray, box: list[tuple[float, float, flo
 
 
 def stage_settings(
-    scene: Any, frames: range, fps: float, low: np.ndarray, high: np.ndarray, stage_file: str
+    scene: Any,
+    frames: range,
+    fps: float,
+    low: np.ndarray,
+    high: np.ndarray,
+    stage_file: str,
+    groups: Sequence[ExportGroup] = (),
 ) -> dict[str, Any]:
-    """The settings written into the stage's metadata and the Blender script (plain values)."""
+    """The settings written into the stage's metadata and the Blender script (plain values);
+    ``groups`` of a scene of several add each group's prim name and colour."""
     from jellysim._version import __version__
     from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 
@@ -85,6 +106,14 @@ def stage_settings(
         "fluid_color": [float(v) for v in fluid_material().base_color],
         "view_direction": [float(v) for v in VIEW_DIRECTION],
         "field_of_view": float(FIELD_OF_VIEW),
+        **(
+            {
+                "group_prims": [prim_name(g.part) for g in groups],
+                "group_colors": [float(c) for g in groups for c in g.material.base_color],
+            }
+            if len(groups) > 1
+            else {}
+        ),
     }
 
 
@@ -113,7 +142,7 @@ def _bind_material(stage: Any, prim: Any, material: Material) -> None:
     ``displayColor``/``displayOpacity`` for viewers that read only those."""
     from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 
-    path = f"/Jellyfish/Looks/{material.name.capitalize()}"
+    path = f"/Jellyfish/Looks/{prim_name(material.name)}"
     shading = UsdShade.Material.Define(stage, path)
     shader = UsdShade.Shader.Define(stage, f"{path}/PreviewSurface")
     shader.CreateIdAttr("UsdPreviewSurface")
@@ -132,12 +161,63 @@ def _bind_material(stage: Any, prim: Any, material: Material) -> None:
     gprim.CreateDisplayOpacityAttr(Vt.FloatArray([material.opacity]))
 
 
+def _write_threads(
+    stage: Any, group: ExportGroup, frames: range, low: np.ndarray, high: np.ndarray
+) -> None:
+    """A thread group as linear ``BasisCurves`` at ``/Jellyfish/<prim_name(part)>``."""
+    from pxr import UsdGeom, Vt
+
+    _, count, particles, _ = group.positions.shape
+    curves = UsdGeom.BasisCurves.Define(stage, f"/Jellyfish/{prim_name(group.part)}")
+    curves.CreateTypeAttr(UsdGeom.Tokens.linear)
+    curves.CreateCurveVertexCountsAttr(Vt.IntArray([particles] * count))
+    widths = np.tile(2.0 * group.radii, count).astype(np.float32)
+    curves.CreateWidthsAttr(Vt.FloatArray.FromNumpy(widths))
+    curves.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+    _bind_material(stage, curves.GetPrim(), group.material)
+    points_attr, extent_attr = curves.CreatePointsAttr(), curves.CreateExtentAttr()
+    for frame in frames:
+        points = group.positions[frame].reshape(-1, 3).astype(np.float32)
+        points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
+        box = _extent(points, float(widths.max()) / 2.0)
+        extent_attr.Set(Vt.Vec3fArray(box), frame)
+        _bounds(low, high, box)
+
+
+def _write_arms(
+    stage: Any, group: ExportGroup, frames: range, low: np.ndarray, high: np.ndarray
+) -> None:
+    """A ribbon group as a double-sided triangle ``Mesh`` at ``/Jellyfish/<prim_name(part)>``,
+    every attribute time-sampled (an arm's triangle count follows its shape)."""
+    from pxr import UsdGeom, Vt
+
+    mesh = UsdGeom.Mesh.Define(stage, f"/Jellyfish/{prim_name(group.part)}")
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateDoubleSidedAttr(True)
+    _bind_material(stage, mesh.GetPrim(), group.material)
+    counts, indices = mesh.CreateFaceVertexCountsAttr(), mesh.CreateFaceVertexIndicesAttr()
+    points_attr, normals_attr = mesh.CreatePointsAttr(), mesh.CreateNormalsAttr()
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    extent_attr = mesh.CreateExtentAttr()
+    for frame in frames:
+        arms = group.ribbon_meshes(frame)
+        counts.Set(Vt.IntArray([3] * len(arms.faces)), frame)
+        indices.Set(Vt.IntArray.FromNumpy(arms.faces.astype(np.int32).ravel()), frame)
+        points = arms.vertices.astype(np.float32)
+        points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
+        normals_attr.Set(Vt.Vec3fArray.FromNumpy(arms.normals.astype(np.float32)), frame)
+        if len(points):
+            box = _extent(points)
+            extent_attr.Set(Vt.Vec3fArray(box), frame)
+            _bounds(low, high, box)
+
+
 def export_usd(
     result: Result, out: Path, frames: range, interpolation: int | None = None
 ) -> list[Path]:
     from pxr import Usd, UsdGeom, Vt
 
-    from jellysim.render.frame import tentacle_radii
     from jellysim.render.pipeline import scene_look
 
     f = result.file
@@ -172,26 +252,12 @@ def export_usd(
             extent_attr.Set(Vt.Vec3fArray(box), frame)
             _bounds(low, high, box)
 
-    if result.has(fields.TENTACLE_POSITION):
-        from jellysim.interpolation import interpolate_result
-
-        drawn = interpolate_result(result, interpolation)
-        _, count, particles, _ = drawn.shape
-        curves = UsdGeom.BasisCurves.Define(stage, "/Jellyfish/Tentacles")
-        curves.CreateTypeAttr(UsdGeom.Tokens.linear)
-        curves.CreateCurveVertexCountsAttr(Vt.IntArray([particles] * count))
-        radii = tentacle_radii(particles, look)
-        widths = np.tile(2.0 * radii, count).astype(np.float32)
-        curves.CreateWidthsAttr(Vt.FloatArray.FromNumpy(widths))
-        curves.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
-        _bind_material(stage, curves.GetPrim(), tentacle_material(look))
-        points_attr, extent_attr = curves.CreatePointsAttr(), curves.CreateExtentAttr()
-        for frame in frames:
-            points = drawn[frame].reshape(-1, 3).astype(np.float32)
-            points_attr.Set(Vt.Vec3fArray.FromNumpy(points), frame)
-            box = _extent(points, float(widths.max()) / 2.0)
-            extent_attr.Set(Vt.Vec3fArray(box), frame)
-            _bounds(low, high, box)
+    groups = export_groups(result, look, interpolation)
+    for group in groups:
+        if group.ribbon:
+            _write_arms(stage, group, frames, low, high)
+        else:
+            _write_threads(stage, group, frames, low, high)
 
     if result.has(fields.FLUID_POSITION):
         cloud = UsdGeom.Points.Define(stage, "/Jellyfish/Fluid")
@@ -208,12 +274,17 @@ def export_usd(
             extent_attr.Set(Vt.Vec3fArray(box), frame)
             _bounds(low, high, box)
 
-    settings = stage_settings(scene, frames, float(f.attrs["fps"]), low, high, path.name)
+    settings = stage_settings(scene, frames, float(f.attrs["fps"]), low, high, path.name, groups)
+
+    def stored(value: Any) -> Any:
+        if not isinstance(value, list):
+            return value
+        if value and isinstance(value[0], str):
+            return Vt.StringArray(value)
+        return Vt.DoubleArray(value)
+
     stage.GetRootLayer().customLayerData = {
-        "jellysim": {
-            key: Vt.DoubleArray(value) if isinstance(value, list) else value
-            for key, value in settings.items()
-        }
+        "jellysim": {key: stored(value) for key, value in settings.items()}
     }
     stage.GetRootLayer().Export(str(path))  # written whole, then visible under its name
     del stage

@@ -7,6 +7,11 @@ Parts (each present only when the result has it):
   particle's index in the result (``particle``). A 2-D fluid's (x, y) is written as (x, y, 0).
 - ``tentacles``: every drawn tentacle (cosine interpolation) as line segments, with the index of
   the drawn tentacle (``tentacle``) and the particle's distance from the root (``arc_length``, m).
+  A scene of several tentacle groups (:mod:`jellysim.export.groups`) writes a part
+  ``tentacles_NAME`` per group instead, each with the cell array ``group`` (the group's index in
+  the result's ``tentacle_groups``): a thread group as above, each tentacle of the group's own
+  particle count; a ribbon group (oral arms) as its ruffled ribbons' triangles with
+  ``Normals`` and ``tentacle`` (the arm) per point.
 - ``bell``: the bell's surface triangles.
 - ``bell_particles`` (a mass-spring bell): its particles as points with ``velocity`` (m/s) and
   ``particle`` (index in ``bell/position``), and its springs as line cells with ``muscle`` (1 for
@@ -25,6 +30,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from jellysim import fields
+from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
 
 
@@ -97,6 +103,25 @@ def tentacle_mesh(drawn: np.ndarray, spacing: float) -> Any:
     )
 
 
+def group_mesh(group: ExportGroup, frame: int, spacing: float) -> Any:
+    """One group of a scene of several at ``frame``: its threads' line segments
+    (:func:`tentacle_mesh`) or its arms' ribbon triangles, with the cell array ``group``."""
+    import meshio
+
+    if not group.ribbon:
+        mesh = tentacle_mesh(group.positions[frame], spacing)
+    else:
+        arms = group.ribbon_meshes(frame)
+        mesh = meshio.Mesh(
+            arms.vertices,
+            [("triangle", arms.faces)],
+            point_data={"Normals": arms.normals, "tentacle": arms.arm},
+        )
+    cells = len(mesh.cells[0].data)
+    mesh.cell_data["group"] = [np.full(cells, group.index, dtype=np.int32)]
+    return mesh
+
+
 def bell_mesh(result: Result, frame: int) -> Any:
     import meshio
 
@@ -133,19 +158,20 @@ def export_vtk(
     import meshio
 
     times = result.time
-    parts: dict[str, list[tuple[float, str]]] = {}
-    drawn = None
-    if result.has(fields.TENTACLE_POSITION):
-        from jellysim.interpolation import interpolate_result
+    from jellysim.render.pipeline import scene_look
 
-        drawn = interpolate_result(result, interpolation)
-    spacing = result.scene.tentacles.spacing
+    parts: dict[str, list[tuple[float, str]]] = {}
+    groups = export_groups(result, scene_look(result.scene), interpolation)
     for frame in frames:
         meshes = {}
         if result.has(fields.FLUID_POSITION):
             meshes["fluid"] = fluid_mesh(result, frame)
-        if drawn is not None:
-            meshes["tentacles"] = tentacle_mesh(drawn[frame], spacing)
+        for group in groups:
+            spacing = result.scene.groups[group.index].tentacles.spacing
+            if len(groups) == 1:
+                meshes[group.part] = tentacle_mesh(group.positions[frame], spacing)
+            else:
+                meshes[group.part] = group_mesh(group, frame, spacing)
         if result.has(fields.BELL_SURFACE_VERTICES):
             meshes["bell"] = bell_mesh(result, frame)
         if result.has(

@@ -10,6 +10,11 @@ Routes (GET only; anything else is 404, so no path reaches the file system but t
 - ``/frames?part=bell|tentacles|fluid&start=S&count=C[&interpolation=N]`` float32 frames
   S to S + C - 1: bell (C, V, 3), drawn tentacles (C, T N, P, 3), fluid (C, N, 3) with the
   particles that left the domain as NaN. Binary bodies are little-endian, C order, in metres.
+  In a scene of several tentacle groups a tentacle frame holds each group's drawn tentacles in
+  turn, (D_g, P_g, 3) each, of the group's own particle count P_g (never NaN-padded): a thread
+  group drawn N per simulated tentacle (D_g = T_g N on a ring, the sum of (m - 1) N + 1 over
+  clusters of m), a ribbon group (oral arms) as simulated (D_g = T_g), whatever N; the groups
+  are listed in ``/meta.json`` (``tentacles.groups``).
 
 What one session may cost the machine is bounded (:class:`ViewLimits`, docs/viewer.md,
 "Security"): the data routes answer only requests carrying the session's token in the
@@ -35,7 +40,7 @@ import threading
 import webbrowser
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
@@ -124,12 +129,51 @@ def _color(rgb: tuple[float, float, float]) -> list[float]:
     return [float(c) for c in rgb]
 
 
+@dataclass(frozen=True)
+class ViewGroup:
+    """One tentacle group as the page draws it: ``rows`` its simulated tentacles in the result,
+    ``particles`` its own, ``clusters`` the sizes of its rows of roots (one: a closed ring),
+    ``ribbon`` drawn as its simulated arms' ribbons (else as interpolated threads)."""
+
+    name: str
+    rows: slice
+    particles: int
+    clusters: tuple[int, ...]
+    ribbon: bool
+
+    def drawn(self, interpolation: int) -> int:
+        """Tentacles drawn at ``interpolation`` per simulated one (as interpolate_groups)."""
+        if self.ribbon:
+            return self.rows.stop - self.rows.start
+        if len(self.clusters) == 1:
+            return self.clusters[0] * interpolation
+        return sum((m - 1) * interpolation + 1 for m in self.clusters)
+
+
+def _view_groups(scene: Any) -> list[ViewGroup]:
+    # The clusters as jellysim.interpolation draws them (its helper, one source of truth).
+    from jellysim.interpolation import _clusters
+    from jellysim.tentacle.layout import root_layout
+
+    return [
+        ViewGroup(
+            group.name,
+            rows,
+            int(group.tentacles.particles),
+            tuple(_clusters(group.tentacles)),
+            group.tentacles.form == "ribbon",
+        )
+        for group, rows in zip(scene.groups, root_layout(scene).slices(), strict=True)
+    ]
+
+
 class ResultData:
     """A result as the page reads it: metadata and float32 chunks of frames.
 
     Reads the file on each request (h5py serialises access between the server's threads); the
     drawn tentacles come from :func:`jellysim.interpolation.interpolate_result` for the frames
-    asked for, the interpolation factor chosen by the page.
+    asked for, the interpolation factor chosen by the page, or in a scene of several groups (or
+    a ribbon group) from :func:`~jellysim.interpolation.interpolate_groups`, group by group.
     """
 
     def __init__(self, result: Result) -> None:
@@ -160,9 +204,17 @@ class ResultData:
         tentacles = result.dataset(fields.TENTACLE_POSITION).shape if self.has_tentacles else None
         self.simulated = 0 if tentacles is None else int(tentacles[1])
         self.particles = 0 if tentacles is None else int(tentacles[2])
-        per_factor = max(1, self.simulated * self.particles)
-        self.max_interpolation = max(1, min(MAX_INTERPOLATION, POINT_BUDGET // per_factor))
-        self.interpolation = min(int(scene.tentacles.interpolation), self.max_interpolation)
+        self.groups = _view_groups(scene) if self.has_tentacles else []
+        # Drawn group by group (else as interpolate_result draws them, as before groups).
+        self.grouped = len(self.groups) > 1 or any(g.ribbon for g in self.groups)
+        # Drawn points per frame: fixed + per_factor x interpolation.
+        fixed = self._points(0) if self.groups else 0
+        per_factor = max(1, self._points(1) - fixed if self.groups else 0)
+        self.max_interpolation = max(
+            1, min(MAX_INTERPOLATION, (POINT_BUDGET - fixed) // per_factor)
+        )
+        own = [int(g.tentacles.interpolation) for g in scene.groups if g.tentacles.form != "ribbon"]
+        self.interpolation = min(max(own, default=1), self.max_interpolation)
         fluid = result.dataset(fields.FLUID_POSITION).shape if self.has_fluid else None
         self.fluid_count = 0 if fluid is None else int(fluid[1])
         self.bell_vertices = (
@@ -173,6 +225,16 @@ class ResultData:
         )
         look = scene_look(scene)
         bell, tentacle = bell_material(look), tentacle_material(look)
+        tentacles_meta: dict[str, Any] = {
+            "present": self.has_tentacles,
+            "simulated": self.simulated,
+            "particles": self.particles,
+            "interpolation": self.interpolation,
+            "max_interpolation": self.max_interpolation,
+            "frame_bytes": self.frame_bytes("tentacles", 1),
+        }
+        if self.grouped:
+            tentacles_meta["groups"] = self._groups_meta(look)
         self._meta: dict[str, Any] = {
             "name": str(scene.name),
             "fps": float(f.attrs.get("fps", scene.fps)),
@@ -199,14 +261,7 @@ class ResultData:
                 "faces": self.bell_face_count,
                 "frame_bytes": self.frame_bytes("bell"),
             },
-            "tentacles": {
-                "present": self.has_tentacles,
-                "simulated": self.simulated,
-                "particles": self.particles,
-                "interpolation": self.interpolation,
-                "max_interpolation": self.max_interpolation,
-                "frame_bytes": self.frame_bytes("tentacles", 1),
-            },
+            "tentacles": tentacles_meta,
             "fluid": {
                 "present": self.has_fluid,
                 "particles": self.fluid_count,
@@ -220,16 +275,51 @@ class ResultData:
     def meta(self) -> dict[str, Any]:
         """``name``, ``fps``, ``frames``, ``complete``, ``time`` (F,) s, ``look`` (linear RGB
         colours, m), ``bell``/``tentacles``/``fluid`` (present, sizes, ``frame_bytes``: one
-        frame's bytes, the tentacles' at one drawn per simulated), ``bounds`` [[low], [high]]
+        frame's bytes, the tentacles' at one drawn per simulated; in a scene of several
+        tentacle groups ``tentacles.groups`` lists them, :meth:`_groups_meta`), ``bounds``
+        [[low], [high]]
         m of the whole animation, ``extent`` m (the largest box of one frame) and ``travels``
         (whether the centre moves further than that: the page then follows it)."""
         return self._meta
+
+    def _points(self, interpolation: int) -> int:
+        """Tentacle points of one frame drawn at ``interpolation``."""
+        return sum(g.drawn(interpolation) * g.particles for g in self.groups)
+
+    def _groups_meta(self, look: Any) -> list[dict[str, Any]]:
+        """Per group: ``name``, ``form`` ("thread" or "ribbon"), ``color`` and ``face_color``
+        (linear RGB: its colour, and seen face-on as a line, ``tentacle_face_color``),
+        ``particles``, ``simulated``, ``clusters`` (sizes of its rows of roots, one: a ring),
+        ``radius`` m and ``taper`` (threads), ``width`` m at the root (ribbons)."""
+        from jellysim.export.groups import export_look
+        from jellysim.render.materials import tentacle_face_color
+
+        out = []
+        for g, group in zip(self.groups, self.result.scene.groups, strict=True):
+            drawn = export_look(look, group.tentacles)
+            out.append(
+                {
+                    "name": g.name,
+                    "form": "ribbon" if g.ribbon else "thread",
+                    "color": _color(drawn.color),
+                    "face_color": _color(
+                        tentacle_face_color(replace(look, tentacle_color=drawn.color))
+                    ),
+                    "particles": g.particles,
+                    "simulated": g.rows.stop - g.rows.start,
+                    "clusters": list(g.clusters),
+                    "radius": drawn.radius,
+                    "taper": drawn.taper,
+                    "width": drawn.width,
+                }
+            )
+        return out
 
     def frame_bytes(self, part: str, interpolation: int = 1) -> int:
         """Bytes of one frame of ``part`` as ``/frames`` sends it (0 for a part not there)."""
         points = {
             "bell": self.bell_vertices,
-            "tentacles": self.simulated * interpolation * self.particles,
+            "tentacles": self._points(interpolation),
             "fluid": self.fluid_count,
         }[part]
         return points * 3 * FLOAT32_BYTES
@@ -318,6 +408,24 @@ class ResultData:
             request.part, request.interpolation
         )
 
+    def _group_frames(self, request: FrameRequest) -> np.ndarray:
+        """(C, points) m: each frame's groups in turn, threads interpolated, ribbons as
+        simulated."""
+        from jellysim.interpolation import interpolate_groups
+
+        window = (request.start, request.stop)
+        count = request.stop - request.start
+        simulated = self.result.read(fields.TENTACLE_POSITION, slice(*window))
+        pieces = []
+        for g, drawn in zip(
+            self.groups,
+            interpolate_groups(self.result, request.interpolation, frames=window),
+            strict=True,
+        ):
+            own = simulated[:, g.rows, : g.particles] if g.ribbon else drawn.positions
+            pieces.append(np.asarray(own).reshape(count, -1))
+        return np.concatenate(pieces, axis=1)
+
     def chunk(self, request: FrameRequest) -> bytes:
         """The frames of ``request`` as little-endian float32."""
         frames = slice(request.start, request.stop)
@@ -325,11 +433,13 @@ class ResultData:
             data = self.result.read(fields.BELL_SURFACE_VERTICES, frames)
         elif request.part == "fluid":
             data = self._fluid_world(frames)
-        else:
+        elif not self.grouped:
             from jellysim.interpolation import interpolate_result
 
             window = (request.start, request.stop)
             data = interpolate_result(self.result, request.interpolation, frames=window)
+        else:
+            data = self._group_frames(request)
         return np.ascontiguousarray(data, dtype="<f4").tobytes()
 
 

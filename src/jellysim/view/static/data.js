@@ -69,6 +69,15 @@ export async function fetchMeta() {
   return meta;
 }
 
+// Tentacles of `group` (an entry of meta.tentacles.groups) in one frame at `interpolation`, as
+// the server draws them: a ribbon group's arms as simulated, a thread group's ring T N, its
+// clusters of m roots (m - 1) N + 1 each.
+export function drawnCount(group, interpolation) {
+  if (group.form === "ribbon") return group.simulated;
+  if (group.clusters.length === 1) return group.clusters[0] * interpolation;
+  return group.clusters.reduce((sum, m) => sum + (m - 1) * interpolation + 1, 0);
+}
+
 export const fetchBellFaces = () => fetchArray("/bell-faces", Uint32Array);
 export const fetchFluidKinds = () => fetchArray("/fluid-kinds", Uint8Array);
 
@@ -86,6 +95,10 @@ export class FrameStore {
 
   // Bytes of one frame of `part` as the server sends it.
   frameBytes(part, interpolation) {
+    const groups = this.meta.tentacles.groups;
+    if (part === "tentacles" && groups) {
+      return groups.reduce((sum, g) => sum + drawnCount(g, interpolation) * g.particles * 12, 0);
+    }
     return this.meta[part].frame_bytes * (part === "tentacles" ? interpolation : 1);
   }
 

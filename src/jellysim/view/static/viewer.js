@@ -3,7 +3,7 @@
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
-import { FrameStore, fetchBellFaces, fetchFluidKinds, fetchMeta } from "./data.js";
+import { FrameStore, drawnCount, fetchBellFaces, fetchFluidKinds, fetchMeta } from "./data.js";
 
 const VIEW_DIRECTION = new THREE.Vector3(0, 1, -0.25).normalize(); // as jellysim render's camera
 const KIND_COLORS = [
@@ -140,6 +140,52 @@ function tentacleGeometry(count, particles) {
   return geometry;
 }
 
+// A flat ribbon along each of `count` arms of `particles` points: two vertices a particle (the
+// arm's two edges), two triangles a segment; positions set each frame by setRibbons.
+function ribbonGeometry(count, particles) {
+  const geometry = new THREE.BufferGeometry();
+  const positions = new THREE.BufferAttribute(new Float32Array(count * particles * 6), 3);
+  positions.setUsage(THREE.DynamicDrawUsage);
+  geometry.setAttribute("position", positions);
+  const index = new Uint32Array(count * (particles - 1) * 6);
+  let k = 0;
+  for (let t = 0; t < count; t++) {
+    for (let p = 0; p < particles - 1; p++) {
+      const a = 2 * (t * particles + p);
+      index.set([a, a + 1, a + 2, a + 1, a + 3, a + 2], k);
+      k += 6;
+    }
+  }
+  geometry.setIndex(new THREE.BufferAttribute(index, 1));
+  return geometry;
+}
+
+// The ribbons of arms `chains` (count x particles points, xyz) hanging about `centre`: the width
+// of each starts radially out from the bell's axis (horizontal), kept across the local tangent,
+// `width` m at the root narrowing to `taper` of it at the tip (the exports' ruffles left out).
+function setRibbons(geometry, chains, count, particles, group, centre) {
+  const positions = geometry.getAttribute("position");
+  const point = (t, p) => new THREE.Vector3().fromArray(chains, 3 * (t * particles + p));
+  for (let t = 0; t < count; t++) {
+    const outward = point(t, 0).sub(centre).setZ(0);
+    if (outward.lengthSq() === 0) outward.set(1, 0, 0);
+    outward.normalize();
+    for (let p = 0; p < particles; p++) {
+      const tangent = point(t, Math.min(p + 1, particles - 1)).sub(point(t, Math.max(p - 1, 0))).normalize();
+      const across = outward.clone().addScaledVector(tangent, -outward.dot(tangent));
+      if (across.lengthSq() < 1e-12) across.copy(outward);
+      across.normalize();
+      const half = 0.5 * group.width * (1 - ((1 - group.taper) * p) / Math.max(particles - 1, 1));
+      const middle = point(t, p);
+      const v = 2 * (t * particles + p);
+      positions.setXYZ(v, ...middle.clone().addScaledVector(across, -half).toArray());
+      positions.setXYZ(v + 1, ...middle.clone().addScaledVector(across, half).toArray());
+    }
+  }
+  positions.needsUpdate = true;
+  geometry.computeVertexNormals();
+}
+
 // Points as large as the particles (diameter 2 radius): three.js scales an attenuated point's
 // size by half the viewport height over the depth, which is 1 / (2 tan(fov / 2)) of the
 // perspective projection's scale.
@@ -212,7 +258,26 @@ async function main() {
     new THREE.LineBasicMaterial({ color: linear(meta.look.tentacle_face_color) }),
   );
   tentacles.frustumCulled = false;
-  scene.add(tentacles);
+  // A scene of several tentacle groups: an object per group in its own colour, threads as
+  // lines (face-on colour), oral arms as double-sided ribbons (lit, their colour).
+  const groups = (meta.tentacles.groups ?? []).map((group) => {
+    const object =
+      group.form === "ribbon"
+        ? new THREE.Mesh(
+            ribbonGeometry(group.simulated, group.particles),
+            new THREE.MeshPhongMaterial({ color: linear(group.color), side: THREE.DoubleSide, shininess: 20 }),
+          )
+        : new THREE.LineSegments(
+            new THREE.BufferGeometry(),
+            new THREE.LineBasicMaterial({ color: linear(group.face_color) }),
+          );
+    object.name = group.name;
+    object.frustumCulled = false;
+    object.userData.drawn = group.form === "ribbon" ? group.simulated : 0;
+    scene.add(object);
+    return { group, object };
+  });
+  if (groups.length === 0) scene.add(tentacles);
   const fluid = meta.fluid.present ? makeFluid(meta, kinds, camera.fov) : null;
   if (fluid) scene.add(fluid);
 
@@ -291,7 +356,32 @@ async function main() {
       bell.geometry.computeVertexNormals();
       bell.material.userData.uniforms.bellCentre.value.copy(meanOf(data.bell, 3, meta.bell.vertices));
     }
-    if (data.tentacles) {
+    if (data.tentacles && groups.length > 0) {
+      let offset = 0;
+      let total = 0;
+      const middle = data.bell ? meanOf(data.bell, 3, meta.bell.vertices) : null;
+      for (const { group, object } of groups) {
+        const count = drawnCount(group, state.interpolation);
+        const floats = count * group.particles * 3;
+        const chains = data.tentacles.subarray(offset, offset + floats);
+        offset += floats;
+        total += count;
+        if (group.form === "ribbon") {
+          const about = data.bell ? middle : meanOf(chains, 3 * group.particles, count);
+          setRibbons(object.geometry, chains, count, group.particles, group, about);
+          continue;
+        }
+        if (count !== object.userData.drawn) {
+          object.geometry.dispose();
+          object.geometry = tentacleGeometry(count, group.particles);
+          object.userData.drawn = count;
+        }
+        const positions = object.geometry.getAttribute("position");
+        positions.array.set(chains);
+        positions.needsUpdate = true;
+      }
+      state.drawnTentacles = total;
+    } else if (data.tentacles) {
       const particles = meta.tentacles.particles;
       const count = data.tentacles.length / (3 * particles);
       if (count !== state.drawnTentacles) {
@@ -325,9 +415,11 @@ async function main() {
     // Following: move the camera with the jellyfish (the bell's centre, else the roots').
     const next = data.bell
       ? meanOf(data.bell, 3, meta.bell.vertices)
-      : data.tentacles
+      : data.tentacles && groups.length === 0
         ? meanOf(data.tentacles, 3 * meta.tentacles.particles, state.drawnTentacles)
-        : null;
+        : data.tentacles
+          ? meanOf(data.tentacles, 3, data.tentacles.length / 3)
+          : null;
     if (next && centre && $("follow").checked) {
       const shift = next.clone().sub(centre);
       camera.position.add(shift);
