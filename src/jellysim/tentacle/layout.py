@@ -81,13 +81,13 @@ def group_angles(t: Tentacles) -> np.ndarray:
         spread = 0.5 * gap if t.cluster_spread is None else math.radians(t.cluster_spread)
         sizes = np.full(c, n // c)
         sizes[: n % c] += 1
-        angles = []
+        clusters: list[np.ndarray] = []
         for j, m in enumerate(sizes):
             local = np.zeros(1) if m == 1 else (np.arange(m) / (m - 1) - 0.5) * spread
-            angles.append(j * gap + local)
-        return np.concatenate(angles) + offset
-    angles = 2.0 * np.pi * np.arange(n) / n
-    return angles + offset if offset else angles
+            clusters.append(j * gap + local)
+        return np.concatenate(clusters) + offset
+    even: np.ndarray = 2.0 * np.pi * np.arange(n) / n
+    return even + offset if offset else even
 
 
 def _is_even_from_zero(t: Tentacles) -> bool:
