@@ -91,8 +91,66 @@ def test_bad_option(tmp_path: Path, args: tuple[str, ...], named: tuple[str, ...
     check_subprocess(tmp_path, ("run", PRESET, *args), named)
 
 
+# Tentacle groups (issue 25), on a preset with two: marginal and oral_arms.
+GROUPED = "purple-jelly"
+GROUP_CASES = {
+    "unknown-group": (
+        ("--set", "tentacles.oral_armz.count=3"),
+        ("tentacles.oral_armz.count", "unknown tentacle group 'oral_armz'", "oral_arms"),
+    ),
+    "group-without-roots": (
+        ("--set", "tentacles.oral_arms.count=0"),
+        ("tentacles.oral_arms.count = 0", "no roots"),
+    ),
+    "arms-too-wide": (
+        ("--set", "tentacles.oral_arms.mouth_radius=0.95"),
+        ("tentacles.oral_arms.mouth_radius", "do not fit under the bell"),
+    ),
+    "group-curl-too-tight": (
+        ("--set", "tentacles.marginal.rest_curvature=80"),
+        ("tentacles.marginal.rest_curvature = 80", "at most 0.5"),
+    ),
+    "shared-key-every-group-sets": (
+        ("--set", "tentacles.count=3"),
+        ("tentacles.count", "every tentacle group sets count"),
+    ),
+    "unknown-key-in-group": (
+        ("--set", "tentacles.marginal.cout=3"),
+        ("tentacles.marginal.cout", "did you mean 'count'"),
+    ),
+}
+
+
+@pytest.mark.parametrize(("args", "named"), GROUP_CASES.values(), ids=GROUP_CASES)
+def test_bad_group_option(tmp_path: Path, args: tuple[str, ...], named: tuple[str, ...]) -> None:
+    check_subprocess(tmp_path, ("run", GROUPED, *args), named)
+
+
+def test_set_names_no_group_in_a_one_table_scene(tmp_path: Path) -> None:
+    check_subprocess(
+        tmp_path,
+        ("run", PRESET, "--set", "tentacles.arms.count=4"),
+        ("tentacles.arms.count", "no tentacle group 'arms'"),
+    )
+
+
 # (file name, its TOML text or None for a folder, texts that stderr must contain)
 FILE_CASES = {
+    "group-named-like-a-key": (
+        "scene.toml",
+        "[tentacles.count]\nparticles = 3\n",
+        ("tentacles.count", "not a group"),
+    ),
+    "nested-group": (
+        "scene.toml",
+        "[tentacles.arms]\ncount = 2\n[tentacles.arms.tips]\ncount = 1\n",
+        ("tentacles.arms.tips", "do not nest"),
+    ),
+    "angles-for-another-count": (
+        "scene.toml",
+        "[tentacles.arms]\ncount = 3\nangles = [0.0, 90.0]\n",
+        ("tentacles.arms.angles", "2 angles", "count = 3"),
+    ),
     "unknown-nested-key": (
         "scene.toml",
         "[tentacles]\ncout = 3\n",
