@@ -1,0 +1,99 @@
+"""Throughput of the lions-mane preset: 600 tentacles of 60 particles in 8 clusters plus 4 oral
+arms, two tentacle groups, each with its own substep (issue 25).
+
+    .venv/bin/python benchmarks/bench_lions_mane.py [--threads N] [--duration S] [--repeats R]
+        [--no-output]
+
+Each repeat runs ``jellysim.run("lions-mane", out=<temporary folder>)`` with output on
+(result.h5 written with every frame, the bell's mesh included, checkpoints as the preset sets
+them); with ``--no-output`` it steps a :class:`jellysim.Simulation` frame by frame instead and
+writes nothing. Reported per repeat: the wall time (start-up and JIT compilation excluded; the
+first, untimed frame compiles or loads the kernels), the CPU time of the process over the same span
+(all its threads), the particle-steps per second (simulated particles x substeps, summed over the
+groups, per wall second) and the load average at the end of the repeat; once, the frames and the
+substeps per frame of each group. On a machine whose cores other work shares, the wall time
+mostly measures that work; the CPU time does not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+import time
+
+import numba
+
+import jellysim
+from jellysim.simulation import Simulation
+
+SCENE = "lions-mane"
+
+
+def particle_steps_per_frame(simulation: Simulation) -> int:
+    """Simulated particles x substeps per frame, summed over the tentacle groups."""
+    return sum(
+        g.scene.tentacles.count * g.scene.tentacles.particles * g.plan.substeps
+        for g in simulation.groups  # type: ignore[attr-defined]
+    )
+
+
+def timed_run(duration: float, output: bool) -> tuple[float, float]:
+    """Wall and CPU time (s) of one run of ``duration`` simulated seconds; with output, the
+    whole of ``jellysim.run`` (scene set-up and writing included), without, the frame loop."""
+    scene = jellysim.load_scene(SCENE, {"duration": duration})
+    if output:
+        with tempfile.TemporaryDirectory() as folder:
+            start, cpu = time.perf_counter(), time.process_time()
+            jellysim.run(scene, folder, quiet=True).close()
+            return time.perf_counter() - start, time.process_time() - cpu
+    simulation = Simulation(scene)
+    simulation.prepare()
+    start, cpu = time.perf_counter(), time.process_time()
+    for _ in range(scene.frame_count - 1):
+        simulation.step_frame()
+    return time.perf_counter() - start, time.process_time() - cpu
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--threads", type=int, default=numba.config.NUMBA_NUM_THREADS)
+    parser.add_argument("--duration", type=float, default=10.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--no-output", action="store_true", help="step frames, write nothing")
+    args = parser.parse_args()
+    numba.set_num_threads(args.threads)
+
+    start = time.perf_counter()
+    warm = Simulation(jellysim.load_scene(SCENE, {"duration": 0.1}))
+    warm.step_frame()
+    print(f"first frame incl. JIT compile or cache load: {time.perf_counter() - start:.2f} s")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+        f"numba {numba.__version__}, threads {numba.get_num_threads()}, "
+        f"threading layer {numba.threading_layer()}"
+    )
+    scene = jellysim.load_scene(SCENE, {"duration": args.duration})
+    frames = scene.frame_count - 1
+    substeps = ", ".join(
+        f"{g.name} {g.scene.tentacles.count}x{g.scene.tentacles.particles} {g.plan.substeps}/frame"
+        for g in warm.groups  # type: ignore[attr-defined]
+    )
+    work = particle_steps_per_frame(warm) * frames
+    print(
+        f"{SCENE}, {args.duration:g} s simulated, {frames} frames; {substeps}; "
+        f"output {'off' if args.no_output else 'on'}"
+    )
+    print(
+        f"{'repeat':>6} {'wall [s]':>9} {'CPU [s]':>8} {'particle-steps/s':>17} "
+        f"{'load average':>13}"
+    )
+    for repeat in range(args.repeats):
+        wall, cpu = timed_run(args.duration, not args.no_output)
+        load = os.getloadavg()[0]
+        print(f"{repeat:>6d} {wall:>9.2f} {cpu:>8.2f} {work / wall:>17.3g} {load:>13.2f}")
+
+
+if __name__ == "__main__":
+    main()
