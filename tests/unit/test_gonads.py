@@ -114,7 +114,7 @@ def test_the_gonads_are_in_the_povray_scene_only_when_set() -> None:
     assert with_four.replace(block, "") == without
     assert block.count("cone{") == 4 * (jelly(4).gonads.paths.shape[1] - 1)  # type: ignore[union-attr]
     color = jelly(4).look.gonad_color
-    assert f"rgbt <{color[0]:.4g},{color[1]:.4g},{color[2]:.4g}," in block
+    assert f"rgb <{color[0]:.4g},{color[1]:.4g},{color[2]:.4g}>" in block
 
 
 def test_the_preview_shows_gonad_coloured_pixels_inside_the_bell(tmp_path: Path) -> None:

@@ -439,14 +439,15 @@ def manubrium_block(jelly: Jellyfish, glow: bool) -> str:
 
 GONAD_GLOW = 1.0  # the gonads' emission at final quality, relative to the bell's (own colour)
 GONAD_EDGE = 0.4  # a gonad's outline: its colour moved this far towards white (soft tissue)
-GONAD_TRANSMIT = 0.15  # the light behind that passes a gonad face-on (half at its outline)
 
 
 def gonads_block(jelly: Jellyfish, glow: bool) -> str:
     """The horseshoe gonads (:func:`jellysim.render.pipeline.gonads`): tubes of cones with a
-    sphere at each joint and end, one ``union`` in ``look.gonad_color``, a little translucent,
-    lighter and more opaque at their outline (the ``aoi`` pattern), glowing a little at a
-    quality with glow; seen through the translucent bell. Nothing when the frame has none."""
+    sphere at each joint and end, one ``union`` in ``look.gonad_color``, lighter at their
+    outline (the ``aoi`` pattern, a soft edge), glowing a little at a quality with glow; seen
+    through the translucent bell. Opaque: translucent gonads inside the bell's medium cost a
+    third more time a final frame for no visible gain (docs/performance.md). Nothing when the
+    frame has none."""
     if jelly.gonads is None:
         return ""
     radius = f"{jelly.gonads.radius:.4g}"
@@ -460,8 +461,7 @@ def gonads_block(jelly: Jellyfish, glow: bool) -> str:
     look = jelly.look
     color = np.asarray(look.gonad_color, dtype=np.float64)
     lighter = color + GONAD_EDGE * (1.0 - color)
-    face = f"rgbt <{_rgb(color)[1:-1]},{GONAD_TRANSMIT:.3g}>"
-    edge = f"rgbt <{_rgb(lighter)[1:-1]},{0.5 * GONAD_TRANSMIT:.3g}>"
+    face, edge = f"rgb {_rgb(color)}", f"rgb {_rgb(lighter)}"
     finish = "finish { ambient 0.2 diffuse 0.6 specular 0.1 roughness 0.1"
     finish += f" emission {GONAD_GLOW * GLOW_EMISSION * look.glow:.3g} }}" if glow else " }"
     parts.append(
