@@ -583,6 +583,21 @@ class Look:
         doc="radial stripes seen through the bell, in a mix of the bell's and the tentacles' "
         "colours (default: bell.lobes / 2, one on every other lobe; 0: none)",
     )
+    gonads: int | None = param(
+        None,
+        kind="int",
+        ge=0,
+        le=16,
+        nullable=True,
+        doc="horseshoe gonads seen through the bell, open towards the margin, on the "
+        "subumbrella about the bell's axis (Aurelia's four; default 0: none)",
+    )
+    gonad_color: tuple[float, float, float] | None = param(
+        None,
+        kind="color",
+        nullable=True,
+        doc="colour of the gonads (linear RGB; default a violet)",
+    )
     marine_snow: int | None = param(
         None,
         kind="int",

@@ -53,6 +53,8 @@ class Look:
     marine_snow: int = 400  # drifting particles in the water around the camera
     light_shafts: float = 0.5  # brightness of the light shafts from above at final quality
     depth_of_field: float = 1.0  # focal blur at final quality, 0 everything sharp
+    gonads: int = 0  # horseshoe gonads seen through the bell, 0 none
+    gonad_color: RGB = (0.45, 0.25, 0.85)  # a violet
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,15 @@ class Manubrium:
 
 
 @dataclass(frozen=True)
+class Gonads:
+    """A jellyfish's horseshoe gonads in one frame: ``paths`` (G, S, 3) m, the centre line of
+    each horseshoe from one open end round to the other, drawn as a tube of ``radius`` m."""
+
+    paths: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True)
 class Jellyfish:
     """One jellyfish in one frame.
 
@@ -89,7 +100,8 @@ class Jellyfish:
     first, drawn as threads in ``look``'s tentacle colour, radius and taper; ``groups`` further
     drawn tentacles, each group in its own look (the render pipeline puts every scene group
     here and leaves ``tentacles`` empty); ``centre`` (3,) m the bell's margin centre (the axis
-    ribbons turn out from), ``manubrium`` the stalk of a scene with oral arms.
+    ribbons turn out from), ``manubrium`` the stalk of a scene with oral arms, ``gonads`` the
+    horseshoes seen through the bell when ``look.gonads`` asks for them.
     """
 
     tentacles: np.ndarray
@@ -99,6 +111,7 @@ class Jellyfish:
     groups: tuple[DrawnTentacles, ...] = ()
     centre: np.ndarray | None = None
     manubrium: Manubrium | None = None
+    gonads: Gonads | None = None
 
     def drawn(self) -> tuple[DrawnTentacles, ...]:
         """Every group to draw: ``tentacles`` in the jellyfish's own look (if any), then

@@ -29,7 +29,15 @@ from jellysim.errors import InputError
 from jellysim.io.folders import output_folder
 from jellysim.io.result import Result
 from jellysim.progress import progress
-from jellysim.render.frame import Camera, DrawnTentacles, Frame, Jellyfish, Look, Manubrium
+from jellysim.render.frame import (
+    Camera,
+    DrawnTentacles,
+    Frame,
+    Gonads,
+    Jellyfish,
+    Look,
+    Manubrium,
+)
 from jellysim.render.materials import GroupLook, group_look
 
 SETTINGS_FILE = "render.json"
@@ -100,6 +108,7 @@ class Member:
             groups=groups,
             centre=centre,
             manubrium=manubrium(vertices, centre, groups),
+            gonads=gonads(vertices, self.bell_faces, centre, self.look.gonads),
         )
 
     def centres(self) -> np.ndarray:
@@ -170,6 +179,75 @@ def manubrium(
     return Manubrium(top, bottom, MANUBRIUM_FLARE * radius, radius)
 
 
+GONAD_CENTRE = 0.42  # a horseshoe's centre from the bell's axis, in bell radii
+GONAD_LOOP = 0.17  # a horseshoe's radius, in bell radii (less where many would touch)
+GONAD_OPENING = 0.3  # the horseshoe's gap towards the margin, in turns of its loop
+GONAD_THICKNESS = 0.05  # the tube's radius, in bell radii
+GONAD_POINTS = 25  # points along each horseshoe
+
+
+def gonads(
+    vertices: np.ndarray | None, faces: np.ndarray | None, centre: np.ndarray | None, count: int
+) -> Gonads | None:
+    """``count`` horseshoe gonads on the subumbrella of the bell surface ``vertices`` (V, 3) m,
+    ``faces`` (M, 3), about the vertical axis through ``centre`` (3,) m (the surface's mean when
+    None), placed afresh each frame so that they follow the bell as it pulses.
+
+    With ``R`` the surface's largest distance from the axis in this frame, horseshoe ``k`` is an
+    arc of radius ``GONAD_LOOP R`` about a point ``GONAD_CENTRE R`` from the axis at the
+    interradial angle ``2 pi (k + 1/2) / count`` (between the oral arms' default angles), open
+    towards the margin (a gap of ``GONAD_OPENING`` of a turn), its points lifted to the lowest
+    crossing of the vertical through them with the surface (the subumbrella), less the tube's
+    radius ``GONAD_THICKNESS R``: just under the subumbrella, touching it. None when
+    ``count`` is 0, there is no surface, or no point lies under it."""
+    if count <= 0 or vertices is None or faces is None or not len(faces):
+        return None
+    axis = vertices.mean(axis=0) if centre is None else centre
+    radius = float(np.linalg.norm((vertices - axis)[:, :2], axis=1).max())
+    loop = radius * min(GONAD_LOOP, 0.8 * GONAD_CENTRE * math.sin(math.pi / count))
+    half_gap = math.pi * GONAD_OPENING
+    turn = np.linspace(half_gap, 2.0 * math.pi - half_gap, GONAD_POINTS)  # 0 points outwards
+    paths = []
+    for k in range(count):
+        azimuth = 2.0 * math.pi * (k + 0.5) / count
+        outward = np.array([math.cos(azimuth), math.sin(azimuth)])
+        across = np.array([-outward[1], outward[0]])
+        middle = axis[:2] + GONAD_CENTRE * radius * outward
+        xy = middle + loop * (np.cos(turn)[:, None] * outward + np.sin(turn)[:, None] * across)
+        paths.append(np.column_stack([xy, lowest_crossing(vertices, faces, xy)]))
+    points = np.stack(paths)
+    if not np.isfinite(points).all():
+        return None
+    thickness = GONAD_THICKNESS * radius
+    points[..., 2] -= thickness  # the tube's top touches the subumbrella from below
+    return Gonads(points, thickness)
+
+
+def lowest_crossing(vertices: np.ndarray, faces: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Height (N,) m of the lowest crossing of the vertical line through each point ``xy``
+    (N, 2) m with the triangles ``faces`` of ``vertices`` (barycentric in the horizontal plane;
+    upright triangles skipped); points without a crossing take the height of the nearest point
+    along ``xy`` with one (NaN when none has one)."""
+    corners = vertices[faces]  # (M, 3, 3)
+    a, b, c = corners[:, 0, :2], corners[:, 1, :2], corners[:, 2, :2]
+    e1, e2 = b - a, c - a
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # (M,)
+    flat = np.abs(det) > 1e-12 * max(float(np.abs(det).max()), 1e-300)
+    e1, e2, a, det = e1[flat], e2[flat], a[flat], det[flat]
+    z = corners[flat, :, 2]
+    d = xy[:, None, :] - a[None, :, :]  # (N, M, 2)
+    u = (d[..., 0] * e2[:, 1] - d[..., 1] * e2[:, 0]) / det
+    v = (e1[:, 0] * d[..., 1] - e1[:, 1] * d[..., 0]) / det
+    inside = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0)
+    height = z[:, 0] + u * (z[:, 1] - z[:, 0]) + v * (z[:, 2] - z[:, 0])
+    lowest = np.where(inside, height, np.inf).min(axis=1)
+    hit = np.isfinite(lowest)
+    if not hit.any():
+        return np.full(len(xy), np.nan)
+    index = np.arange(len(xy))
+    return np.interp(index, index[hit], lowest[hit])
+
+
 def to_world(points: np.ndarray) -> np.ndarray:
     """Particle positions (K, D) as 3-D world points: a 2-D fluid's (x, y up) becomes (x, 0, y)."""
     if points.shape[-1] == 3:
@@ -231,6 +309,8 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
         marine_snow=unset(look.marine_snow, default.marine_snow),
         light_shafts=unset(look.light_shafts, default.light_shafts),
         depth_of_field=unset(look.depth_of_field, default.depth_of_field),
+        gonads=unset(look.gonads, default.gonads),
+        gonad_color=unset(look.gonad_color, default.gonad_color),
     )
 
 

@@ -9,6 +9,7 @@ glowing, refracting and holding a scattering medium; tentacles group by group, e
 look: a thread group's tentacles tapered tubes made of short cones with a sphere at each joint,
 in one ``union`` (far faster to parse and trace than one ``sphere_sweep`` per tentacle), a
 ribbon group's oral arms ruffled curtains in one ``mesh2``, hung from a manubrium (a cone);
+horseshoe gonads (``look.gonads``) as tubes inside the bell;
 three lights after the paper's Fig. 12 (key, fill and back); the water a ground fog for the
 depth fade, with drifting marine snow and, at final quality, light shafts from above and depth
 of field; optionally the paper's room with a water tank.
@@ -436,6 +437,41 @@ def manubrium_block(jelly: Jellyfish, glow: bool) -> str:
     )
 
 
+GONAD_GLOW = 1.0  # the gonads' emission at final quality, relative to the bell's (own colour)
+GONAD_EDGE = 0.4  # a gonad's outline: its colour moved this far towards white (soft tissue)
+
+
+def gonads_block(jelly: Jellyfish, glow: bool) -> str:
+    """The horseshoe gonads (:func:`jellysim.render.pipeline.gonads`): tubes of cones with a
+    sphere at each joint and end, one ``union`` in ``look.gonad_color``, lighter at their
+    outline (the ``aoi`` pattern, a soft edge), glowing a little at a quality with glow; seen
+    through the translucent bell. Opaque: translucent gonads inside the bell's medium cost a
+    third more time a final frame for no visible gain (docs/performance.md). Nothing when the
+    frame has none."""
+    if jelly.gonads is None:
+        return ""
+    radius = f"{jelly.gonads.radius:.4g}"
+    parts = ["union {"]
+    for path in jelly.gonads.paths:
+        points = [vec(p) for p in path]
+        parts.extend(f"sphere{{{point},{radius}}}" for point in points)
+        parts.extend(
+            f"cone{{{points[i]},{radius},{points[i + 1]},{radius}}}" for i in range(len(points) - 1)
+        )
+    look = jelly.look
+    color = np.asarray(look.gonad_color, dtype=np.float64)
+    lighter = color + GONAD_EDGE * (1.0 - color)
+    face, edge = f"rgb {_rgb(color)}", f"rgb {_rgb(lighter)}"
+    finish = "finish { ambient 0.2 diffuse 0.6 specular 0.1 roughness 0.1"
+    finish += f" emission {GONAD_GLOW * GLOW_EMISSION * look.glow:.3g} }}" if glow else " }"
+    parts.append(
+        f"texture {{ pigment {{ aoi color_map {{ [0 {face}] [0.3 {face}] [0.5 {edge}] "
+        f"[0.7 {face}] [1 {face}] }} }} {finish} }}"
+    )
+    parts.append("}")
+    return "\n".join(parts) + "\n"
+
+
 def fluid_block(frame: Frame, style: str) -> str:
     """Fluid particles as small spheres, or as one blobby surface over them."""
     if frame.fluid is None or frame.fluid.size == 0:
@@ -518,6 +554,7 @@ def scene_text(
                 parts.append(light_shafts_block(camera, look, water, seed))
     for jelly in frame.jellyfish:
         parts.append(bell_block(jelly, quality))
+        parts.append(gonads_block(jelly, quality.glow))
         parts.append(manubrium_block(jelly, quality.glow))
         parts.append(tentacles_block(jelly, water, quality))
     parts.append(fluid_block(frame, fluid_style))

@@ -25,6 +25,8 @@ Matplotlib ``PolyCollection``, sorted far to near by the distance of its centre 
 - Tentacle groups: each group in its own look (:func:`~jellysim.render.materials.group_look`);
   a ribbon group's oral arms as the triangles of the meshes POV-Ray draws, shaded as the bell
   (:func:`~jellysim.render.ribbons.ribbon_primitives`), the manubrium as a cone's triangles.
+- Gonads (``look.gonads``): the horseshoes' tubes drawn as tentacles are, in
+  ``look.gonad_color``, untapered and opaque, sorted among the bell's triangles.
 - Fluid particles: translucent hexagons of radius ``fluid_radius`` projected (at least
   ``MIN_HALF_WIDTH``), in the water colour moved ``FLUID_TINT`` of the way to white.
 - Depth fade (exponential fog): a colour at distance ``d`` from the camera keeps the fraction
@@ -47,6 +49,7 @@ size, where the shared edges of the translucent bell's triangles show as a faint
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -168,6 +171,7 @@ def render_preview(
     for jellyfish in frame.jellyfish:
         parts.append(bell_primitives(jellyfish, view, near))
         parts.append(manubrium_primitives(jellyfish, view, near))
+        parts.append(gonad_primitives(jellyfish, view, near, samples))
         for group in jellyfish.drawn():
             if group.look.form == "ribbon":
                 parts.append(arm_primitives(jellyfish, group, view, near))
@@ -332,6 +336,22 @@ def arm_primitives(
 
     meshes = arm_meshes(jellyfish, group)
     return ribbon_primitives(meshes, group.look.color, arm_tissue(jellyfish.look), view, near)
+
+
+def gonad_primitives(jellyfish: Jellyfish, view: View, near: float, samples: int) -> Primitives:
+    """The horseshoe gonads as the tentacles' camera-facing ribbons, of the gonads' radius
+    (untapered) in ``look.gonad_color``, opaque; sorted among the bell's triangles, so the
+    bell's near side veils them."""
+    if jellyfish.gonads is None:
+        return empty_primitives()
+    look = replace(
+        jellyfish.look,
+        tentacle_color=jellyfish.look.gonad_color,
+        tentacle_radius=jellyfish.gonads.radius,
+        tentacle_taper=1.0,
+        tentacle_transparency=0.0,
+    )
+    return tentacle_primitives(jellyfish.gonads.paths, look, view, near, samples)
 
 
 MANUBRIUM_SIDES = 16  # sides of the manubrium's cone in the preview
