@@ -5,7 +5,6 @@ the ribbon's width, flatness, ruffle wavelength and amplitude, robustness, the P
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import matplotlib.image
@@ -240,16 +239,6 @@ def test_povray_text_has_every_ribbon_in_one_mesh2_in_povray_coordinates() -> No
         )
         == ""
     )
-
-
-def test_povray_text_for_a_purple_jellyfish_is_written_fast() -> None:
-    """4 arms x 10 drawn, 150 particles each: well under a second."""
-    chain = s_curve(1.0, 150)
-    meshes = [ribbon_mesh(chain, OUTWARD, 0.06, 0.3, 20.0, 0.4, phase=0.7 * k) for k in range(40)]
-    start = time.perf_counter()
-    text = povray_ribbons(meshes, (0.5, 0.2, 0.6), Look())
-    assert time.perf_counter() - start < 1.0
-    assert len(text) > 0
 
 
 @pytest.mark.skipif(povray.find_povray() is None, reason="POV-Ray is not installed")
