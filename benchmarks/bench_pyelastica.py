@@ -55,7 +55,7 @@ OVERRIDES = {
     "tentacles.youngs_modulus": 2.4e5,
     "tentacles.bending": "euler-bernoulli",  # EI with I = pi d^4 / 64, as in the Cosserat rod
     "tentacles.root": "clamped",
-    "tentacles.rest_curvature": 0.0,  # straight at rest, as the Cosserat rod
+    "tentacles.rest_curvature": 0.0,  # straight at rest, as the Cosserat rod (brown-jelly curls)
     "tentacles.rest_curvature_tip": 0.0,
     "flow.speed": 0.3,
     "flow.noise": 0.0,
@@ -81,7 +81,7 @@ TARGET_SPEEDUP = 20.0  # the issue's target wall-time ratio
 
 def scene_for(duration: float, dt_safety: float = 1.0) -> Scene:
     return jellysim.load_scene(
-        "forced-tentacles", {**OVERRIDES, "duration": duration, "solver.dt_safety": dt_safety}
+        "brown-jelly", {**OVERRIDES, "duration": duration, "solver.dt_safety": dt_safety}
     )
 
 

@@ -30,7 +30,7 @@ SECONDS = 20.0  # a reader that has not answered by then hangs (HDF5's SWMR retr
 @pytest.fixture(scope="module")
 def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("good")
-    done = jellysim_run(out, ["duration=1", "fps=30", "tentacles.marginal.count=3"], "--force")
+    done = jellysim_run(out, ["duration=1", "fps=30", "tentacles.count=3"], "--force")
     assert done.returncode == 0, done.stderr
     return out
 

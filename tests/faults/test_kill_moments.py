@@ -32,9 +32,8 @@ SCENES: dict[str, tuple[str, list[str]]] = {
     "tentacles": (
         "brown-jelly",
         [
-            "duration=60", "fps=30", "tentacles.marginal.count=2",
-            "tentacles.marginal.particles=20", "solver.checkpoint_every=40",
-            "solver.dt_safety=0.02",
+            "duration=60", "fps=30", "tentacles.count=2", "tentacles.particles=20",
+            "solver.checkpoint_every=40", "solver.dt_safety=0.02",
         ],
     ),
     "fluid": (

@@ -26,12 +26,12 @@ from faultkit import (
 
 # About 117 kB a frame (40 chains of 60 particles), 91 frames: 10.6 MB in all.
 HEAVY = [
-    "duration=3", "fps=30", "tentacles.marginal.count=40", "tentacles.marginal.particles=60",
+    "duration=3", "fps=30", "tentacles.count=40", "tentacles.particles=60",
     "solver.checkpoint_every=10",
 ]  # fmt: skip
 # Two small chains, many substeps: long enough to act on the file while the run writes it.
 LONG = [
-    "duration=60", "fps=30", "tentacles.marginal.count=2", "tentacles.marginal.particles=20",
+    "duration=60", "fps=30", "tentacles.count=2", "tentacles.particles=20",
     "solver.checkpoint_every=10", "solver.dt_safety=0.01",
 ]  # fmt: skip
 

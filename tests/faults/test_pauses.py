@@ -20,7 +20,7 @@ from faultkit import (
 
 # 91 frames written in batches of a second's wall time at most; checkpoints every 10 frames.
 OVERRIDES = [
-    "duration=3", "fps=30", "tentacles.marginal.count=2", "tentacles.marginal.particles=20",
+    "duration=3", "fps=30", "tentacles.count=2", "tentacles.particles=20",
     "solver.checkpoint_every=10", "solver.dt_safety=0.02",
 ]  # fmt: skip
 

@@ -62,20 +62,11 @@ SET_CASES = {
     "unknown-key": (("--set", "durtion=2"), ("durtion", "did you mean 'duration'")),
     "unknown-nested-key": (("--set", "tentacles.cout=3"), ("tentacles.cout", "'count'")),
     "unknown-table": (("--set", "tentacle.count=3"), ("tentacle", "did you mean 'tentacles'")),
-    "string-for-number": (
-        ("--set", "tentacles.marginal.spacing=abc"),
-        ("tentacles.marginal.spacing", "'abc'"),
-    ),
-    "float-for-int": (
-        ("--set", "tentacles.marginal.count=2.5"),
-        ("tentacles.marginal.count = 2.5", "integer"),
-    ),
+    "string-for-number": (("--set", "tentacles.spacing=abc"), ("tentacles.spacing", "'abc'")),
+    "float-for-int": (("--set", "tentacles.count=2.5"), ("tentacles.count = 2.5", "integer")),
     "gravity-of-two": (("--set", "water.gravity=[0, -9.81]"), ("water.gravity", "[0, -9.81]")),
     "bool-for-float": (("--set", "water.density=true"), ("water.density = true",)),
-    "too-few-particles": (
-        ("--set", "tentacles.marginal.particles=2"),
-        ("tentacles.marginal.particles = 2", ">= 3"),
-    ),
+    "too-few-particles": (("--set", "tentacles.particles=2"), ("tentacles.particles = 2", ">= 3")),
     "bad-choice": (("--set", "tentacles.bending=ewin"), ("tentacles.bending", "'ewing'")),
     "huge-int": (("--set", "seed=" + "9" * 30), ("seed", "9" * 30)),
     "set-without-equals": (("--set", "duration"), ("duration", "KEY=VALUE")),
@@ -85,12 +76,12 @@ SET_CASES = {
     "nothing-to-resume": (("--resume",), ("nothing to resume", "result.h5")),
     "force-and-resume": (("--force", "--resume"), ("--force", "--resume")),
     "curl-too-tight": (
-        ("--set", "tentacles.marginal.rest_curvature=80"),
-        ("tentacles.marginal.rest_curvature = 80", "tentacles.marginal.spacing", "at most 0.5"),
+        ("--set", "tentacles.rest_curvature=80"),
+        ("tentacles.rest_curvature = 80", "tentacles.spacing", "at most 0.5"),
     ),
     "torsion-too-tight": (
-        ("--set", "tentacles.marginal.rest_torsion=-80"),
-        ("tentacles.marginal.rest_torsion = -80", "at most 0.5"),
+        ("--set", "tentacles.rest_torsion=-80"),
+        ("tentacles.rest_torsion = -80", "at most 0.5"),
     ),
 }
 
@@ -167,8 +158,8 @@ def test_override_below_a_table_written_as_a_value(tmp_path: Path) -> None:
 
 # Out-of-range numbers: in process (the same main() the subprocesses run; start-up costs ~1 s).
 BOUNDED_KEYS = (
-    "tentacles.marginal.spacing",
-    "tentacles.marginal.youngs_modulus",
+    "tentacles.spacing",
+    "tentacles.youngs_modulus",
     "water.density",
     "tentacles.density",
     "duration",
@@ -194,7 +185,7 @@ def test_out_of_range_number(
 
 
 EXTREME_CASES = {
-    "tiny-spacing": ("tentacles.marginal.spacing=1e-300", "tentacles.marginal.spacing"),
+    "tiny-spacing": ("tentacles.spacing=1e-300", "tentacles.spacing"),
     "dense-water": ("water.density=1e300", "water.density"),
     "thin-water": ("water.density=1e-300", "water.density"),
     "syrup": ("water.viscosity=1e300", "water.viscosity"),
@@ -229,11 +220,11 @@ def test_a_scene_that_needs_too_many_substeps_is_refused_before_writing(tmp_path
         "run",
         PRESET,
         "--set",
-        "tentacles.marginal.youngs_modulus=1e13",
+        "tentacles.youngs_modulus=1e13",
         "--set",
         "fps=0.01",
         "--set",
-        "tentacles.marginal.particles=3",
+        "tentacles.particles=3",
         "--set",
         "duration=100",
     )

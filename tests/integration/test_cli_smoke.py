@@ -18,12 +18,12 @@ import pytest
 import jellysim
 from jellysim import fields
 
-QUICK = ["duration=0.5", "tentacles.marginal.count=2", "tentacles.marginal.particles=20"]
+QUICK = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
 # About 240 frames of some 1,600 substeps: a few seconds, long enough for the bar to update.
 LONG = [
     "duration=8",
-    "tentacles.marginal.count=2",
-    "tentacles.marginal.particles=20",
+    "tentacles.count=2",
+    "tentacles.particles=20",
     "solver.dt_safety=0.003",
 ]
 
@@ -176,7 +176,7 @@ def test_force_replaces_a_result(tmp_path: Path) -> None:
 def test_invalid_set_exits_2_and_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "never"
     for bad, key in [
-        ("tentacles.marginal.count=0", "tentacles.marginal.count"),
+        ("tentacles.count=0", "tentacles.count"),
         ("tentacles.bending=ewnig", "tentacles.bending"),
         ("tentacles.colour=red", "tentacles.colour"),
     ]:
@@ -210,11 +210,10 @@ def test_progress_bar_and_quiet(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
 def test_api_overrides_as_dict_and_as_strings(tmp_path: Path) -> None:
     as_dict = jellysim.load_scene(
         "brown-jelly",
-        {"tentacles.marginal.youngs_modulus": 2.4e5, "tentacles.root": "pinned", "duration": 0.5},
+        {"tentacles.youngs_modulus": 2.4e5, "tentacles.root": "pinned", "duration": 0.5},
     )
     as_strings = jellysim.load_scene(
-        "brown-jelly",
-        ["tentacles.marginal.youngs_modulus=2.4e5", "tentacles.root=pinned", "duration=0.5"],
+        "brown-jelly", ["tentacles.youngs_modulus=2.4e5", "tentacles.root=pinned", "duration=0.5"]
     )
     assert as_dict == as_strings
     assert as_dict.tentacles.youngs_modulus == 2.4e5
@@ -226,8 +225,8 @@ def test_api_overrides_as_dict_and_as_strings(tmp_path: Path) -> None:
     path.write_text(jellysim.scene_to_toml(as_dict), encoding="utf-8")
     assert jellysim.load_scene(path) == as_dict
     assert jellysim.load_scene(str(path)) == as_dict
-    with pytest.raises(jellysim.InputError, match="tentacles.marginal.count"):
-        jellysim.load_scene("brown-jelly", {"tentacles.marginal.count": 0})
+    with pytest.raises(jellysim.InputError, match="tentacles.count"):
+        jellysim.load_scene("brown-jelly", {"tentacles.count": 0})
 
 
 def test_api_run_and_open_result(tmp_path: Path) -> None:

@@ -25,7 +25,7 @@ def test_sweep_writes_a_labelled_figure_and_the_traces(tmp_path):
         "--set",
         "duration=1",
         "--set",
-        "tentacles.marginal.count=1",
+        "tentacles.count=1",
         "--out",
         "figs",
     )

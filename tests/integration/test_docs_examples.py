@@ -91,9 +91,9 @@ NOT_RUN = {
         "group as tests/integration/test_result_groups.py's motion_by_group"
     ),
     "python benchmarks/motion_report.py brown-jelly --set flow.speed=0.3 --set bell.swim_speed=0.3 "
-    "--set tentacles.marginal.particles=60 --set tentacles.marginal.rest_curvature=0 "
-    "--set tentacles.marginal.rest_curvature_tip=0": "the same benchmark with the paper's Case 1 "
-    "values; that --set reaches the preset is tests/integration/test_cli_smoke.py's and "
+    "--set tentacles.particles=60 --set tentacles.rest_curvature=0 "
+    "--set tentacles.rest_curvature_tip=0": "the same benchmark with the paper's Case 1 values; "
+    "that --set reaches the preset is tests/integration/test_cli_smoke.py's and "
     "test_preset_motion.py's, the straight step at a zero rest curvature "
     "tests/unit/test_tentacle_curl.py's",
 }

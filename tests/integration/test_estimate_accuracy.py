@@ -65,7 +65,7 @@ CASES: dict[str, tuple[str, dict[str, object]]] = {
     ),
     "many-tentacles": (
         "brown-jelly",
-        {"duration": 0.1, "tentacles.marginal.count": 50, "tentacles.marginal.particles": 2000},
+        {"duration": 0.1, "tentacles.count": 50, "tentacles.particles": 2000},
     ),
     "brown-jelly": ("brown-jelly", {"duration": 1.0}),
 }

@@ -69,9 +69,9 @@ def test_roots_ride_the_pulsing_swimming_margin(brown: jellysim.Result) -> None:
     centre = brown.file[fields.BELL_CENTRE.path][:, 2]
     swim_speed = brown.scene.bell.swim_speed
     assert centre[-1] - centre[0] == pytest.approx(swim_speed * 3.0, rel=1e-9)
-    # The marginal tentacles came along, trailing behind the margin; they start in their curled
-    # rest shape (issue 25) and the flow draws them out.
-    tips = brown.group_positions("marginal")[:, :, -1, 2] - centre[:, None]
+    # The tentacles came along, trailing behind the margin; they start in their curled rest
+    # shape (issue 25) and the flow draws them out.
+    tips = positions[:, :, -1, 2] - centre[:, None]
     assert np.all(tips < -0.05)
     assert tips[-1].mean() < tips[0].mean() - 0.1
 
@@ -99,23 +99,17 @@ def test_a_bell_without_contraction_holds_still_and_its_tentacles_hang(tmp_path:
         "flow.speed": 0.0,
         "flow.noise": 0.0,
         # Straight at rest: the preset's curl would coil the slack tentacles (issue 25).
-        "tentacles.marginal.rest_curvature": 0.0,
-        "tentacles.marginal.rest_curvature_tip": 0.0,
-        "tentacles.oral_arms.rest_curvature": 0.0,
-        "tentacles.oral_arms.rest_curvature_tip": 0.0,
-        "tentacles.oral_arms.rest_torsion": 0.0,
+        "tentacles.rest_curvature": 0.0,
+        "tentacles.rest_curvature_tip": 0.0,
     }
     result = jellysim.run("brown-jelly", tmp_path, overrides=overrides)
     positions = result.tentacle_positions
     np.testing.assert_allclose(
         positions, np.broadcast_to(positions[:1], positions.shape), atol=1e-9
     )
-    # Both groups hang straight down from their roots (the margin, the mouth: z = 0).
-    for group in result.scene.groups:
-        own = result.group_positions(group.name)
-        spacing = group.tentacles.spacing
-        hanging = np.broadcast_to(-spacing * np.arange(own.shape[2]), own.shape[1:3])
-        np.testing.assert_allclose(own[-1, :, :, 2], hanging, atol=1e-9)
+    spacing = result.scene.tentacles.spacing
+    hanging = np.broadcast_to(-spacing * np.arange(positions.shape[2]), positions.shape[1:3])
+    np.testing.assert_allclose(positions[-1, :, :, 2], hanging, atol=1e-9)
     vertices = result.file[fields.BELL_SURFACE_VERTICES.path][:]
     np.testing.assert_array_equal(vertices, np.broadcast_to(vertices[:1], vertices.shape))
 

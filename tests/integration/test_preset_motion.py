@@ -40,11 +40,10 @@ def test_brown_jelly_tentacles_bend_and_carry_a_wave(brown_jelly: Result) -> Non
 def test_brown_jelly_tentacles_stay_below_the_margin(brown_jelly: Result) -> None:
     """No particle beyond a root rises above the plane of the margin (the kinematic bell swims
     along +z without tilting), so no tentacle passes through the bell."""
+    positions = brown_jelly.read(fields.TENTACLE_POSITION)  # (F, T, P, 3)
     rim = brown_jelly.read(fields.BELL_RIM)  # (F, T, 3)
     margin_height = rim[..., 2].max(axis=1)  # (F,)
-    for group in brown_jelly.tentacle_groups:  # the marginal tentacles and the oral arms
-        positions = brown_jelly.group_positions(group)  # (F, Tg, Pg, 3)
-        assert np.all(positions[:, :, 1:, 2] < margin_height[:, None, None])
+    assert np.all(positions[:, :, 1:, 2] < margin_height[:, None, None])
 
 
 # The paper's Case 1 as the preset file's header and docs/figures.md give it (the former defaults).
@@ -52,9 +51,9 @@ PAPER_CASE_1 = {
     "duration": 0.2,
     "flow.speed": 0.3,
     "bell.swim_speed": 0.3,
-    "tentacles.marginal.particles": 60,
-    "tentacles.marginal.rest_curvature": 0.0,
-    "tentacles.marginal.rest_curvature_tip": 0.0,
+    "tentacles.particles": 60,
+    "tentacles.rest_curvature": 0.0,
+    "tentacles.rest_curvature_tip": 0.0,
 }
 
 
@@ -62,20 +61,14 @@ def test_the_papers_case_1_is_the_straight_step_bit_for_bit(tmp_path: Path) -> N
     """A rest curvature of 0 takes the straight chain's step: the documented overrides give the
     same result as the same scene with the curl keys unset (the defaults before issue 25)."""
     scene = jellysim.load_scene("brown-jelly", PAPER_CASE_1)
-    # The marginal group (the paper's tentacles) with its curl keys unset; the arms as they are.
-    marginal, *others = scene.tentacle_groups
-    unset_curl = dataclasses.replace(
-        marginal,
-        tentacles=dataclasses.replace(
-            marginal.tentacles, rest_curvature=None, rest_curvature_tip=None
-        ),
-    )
     straight = dataclasses.replace(
-        scene, tentacles=unset_curl.tentacles, tentacle_groups=(unset_curl, *others)
+        scene,
+        tentacles=dataclasses.replace(
+            scene.tentacles, rest_curvature=None, rest_curvature_tip=None
+        ),
     )
     assert scene.tentacles.particles == 60 and scene.flow.speed == 0.3
     with jellysim.run(scene, tmp_path / "zero", quiet=True) as zero:
         with jellysim.run(straight, tmp_path / "unset", quiet=True) as unset:
             for field in (fields.TENTACLE_POSITION, fields.TENTACLE_VELOCITY):
-                # equal_nan: the arms' rows beyond their 61 particles are NaN in both
-                assert np.array_equal(zero.read(field), unset.read(field), equal_nan=True)
+                assert np.array_equal(zero.read(field), unset.read(field))

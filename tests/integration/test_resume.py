@@ -33,8 +33,8 @@ CHECKPOINT_EVERY = 50
 SLOW = [
     f"duration={DURATION}",
     f"fps={FPS}",
-    "tentacles.marginal.count=2",
-    "tentacles.marginal.particles=20",
+    "tentacles.count=2",
+    "tentacles.particles=20",
     f"solver.checkpoint_every={CHECKPOINT_EVERY}",
     "solver.dt_safety=0.01",
 ]
@@ -113,9 +113,7 @@ def test_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> None:
 
     # Resuming with another scene is invalid input and touches nothing.
     before = _fingerprint(killed)
-    _assert_invalid_input(
-        _jellysim(killed, [*SLOW, "tentacles.marginal.youngs_modulus=200"], "--resume")
-    )
+    _assert_invalid_input(_jellysim(killed, [*SLOW, "tentacles.youngs_modulus=200"], "--resume"))
     assert _fingerprint(killed) == before
 
     resumed = _jellysim(killed, SLOW, "--resume")
@@ -169,7 +167,7 @@ def test_soft_bell_resume_after_sigkill_is_bitwise_identical(tmp_path: Path) -> 
 
 
 def test_resume_of_a_finished_run_changes_nothing(tmp_path: Path) -> None:
-    quick = ["duration=0.5", "tentacles.marginal.count=2", "tentacles.marginal.particles=20"]
+    quick = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
     assert _jellysim(tmp_path, quick).returncode == 0
     before = _fingerprint(tmp_path)
     assert set(before) == {"result.h5", "scene.toml"}
@@ -178,14 +176,12 @@ def test_resume_of_a_finished_run_changes_nothing(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert _fingerprint(tmp_path) == before
 
-    _assert_invalid_input(
-        _jellysim(tmp_path, [*quick, "tentacles.marginal.youngs_modulus=200"], "--resume")
-    )
+    _assert_invalid_input(_jellysim(tmp_path, [*quick, "tentacles.youngs_modulus=200"], "--resume"))
     assert _fingerprint(tmp_path) == before
 
 
 def test_resume_invalid_requests_exit_2(tmp_path: Path) -> None:
-    quick = ["duration=0.2", "tentacles.marginal.count=2", "tentacles.marginal.particles=20"]
+    quick = ["duration=0.2", "tentacles.count=2", "tentacles.particles=20"]
     _assert_invalid_input(_jellysim(tmp_path / "nothing", quick, "--resume"))
     assert not (tmp_path / "nothing" / "result.h5").exists()
     _assert_invalid_input(_jellysim(tmp_path / "both", quick, "--resume", "--force"))
@@ -200,8 +196,8 @@ def test_api_resume_after_an_aborted_run_is_bitwise_identical(tmp_path: Path) ->
     """In-process: a run aborted by an exception mid-run resumes from its last checkpoint."""
     overrides = {
         "duration": 1.0,
-        "tentacles.marginal.count": 3,
-        "tentacles.marginal.particles": 20,
+        "tentacles.count": 3,
+        "tentacles.particles": 20,
         "solver.checkpoint_every": 4,
     }
     scene = jellysim.load_scene("brown-jelly", overrides)

@@ -43,10 +43,8 @@ THREE_PATHS = (
 
 @pytest.fixture(scope="module")
 def brown(tmp_path_factory: pytest.TempPathFactory) -> Iterator[jellysim.Result]:
-    # brown-jelly's marginal tentacles alone: the one-group viewer (purple below has groups)
     folder = tmp_path_factory.mktemp("brown")
-    scene = jellysim.load_scene("brown-jelly", {"duration": 0.6, "fps": 20.0}).group_scene(0)
-    result = jellysim.run(scene, folder)
+    result = jellysim.run("brown-jelly", folder, overrides={"duration": 0.6, "fps": 20.0})
     yield result
     result.close()
 
@@ -452,8 +450,8 @@ def test_the_page_draws_each_group_in_its_colour(
     )
     assert done.returncode == 0, done.stdout + done.stderr
     (page,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
-    # 8 x 10 threads and 4 arms, then 8 x 3 threads and the same 4 arms.
-    assert page["drawnTentacles"] == [8 * 10 + 4, 8 * 3 + 4]
+    # 8 x 4 threads (the preset's interpolation) and 4 arms, then 8 x 3 threads and the same 4.
+    assert page["drawnTentacles"] == [8 * 4 + 4, 8 * 3 + 4]
     pixels = np.asarray(Image.open(page["screenshot"]).convert("RGB")).astype(np.int64)
     r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
     green = (g > 60) & (g > 2 * r) & (g > 2 * b)

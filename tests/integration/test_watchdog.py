@@ -15,12 +15,7 @@ import pytest
 import jellysim
 from jellysim import fields
 
-OVERRIDES = {
-    "duration": 1.0,
-    "fps": 30.0,
-    "tentacles.marginal.count": 3,
-    "tentacles.marginal.particles": 20,
-}
+OVERRIDES = {"duration": 1.0, "fps": 30.0, "tentacles.count": 3, "tentacles.particles": 20}
 BROKEN = 1  # the tentacle whose state is corrupted
 CLEAN = 5  # frames 0..CLEAN are computed before the corruption
 

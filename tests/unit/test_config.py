@@ -17,7 +17,7 @@ from jellysim.config import (
     scene_to_toml,
 )
 from jellysim.config.docs import scene_reference
-from jellysim.config.load import group_key, parse_toml, scene_to_tree
+from jellysim.config.load import parse_toml, scene_to_tree
 from jellysim.config.schema import SECTIONS
 from jellysim.errors import InputError
 from jellysim.species import preset_names
@@ -158,9 +158,7 @@ def test_overrides_on_nested_keys() -> None:
 def test_overrides_as_mapping_and_on_presets() -> None:
     name = preset_names()[0]
     base = load_scene(name)
-    # tentacles.count of a one-table scene, tentacles.NAME.count of its first named group
-    count = group_key(base.groups[0], "count")
-    scene = load_scene(name, {count: 2, "flow.noise": 0.0})
+    scene = load_scene(name, {"tentacles.count": 2, "flow.noise": 0.0})
     assert scene.tentacles.count == 2
     assert scene.flow.noise == 0.0
     assert scene.tentacles.particles == base.tentacles.particles

@@ -20,9 +20,7 @@ BELL = {
 
 
 def _bell(**overrides):
-    # brown-jelly's marginal tentacles alone: every root on the margin
-    scene = jellysim.load_scene("brown-jelly", {**BELL, **overrides}).group_scene(0)
-    return make_root_driver(scene)
+    return make_root_driver(jellysim.load_scene("brown-jelly", {**BELL, **overrides}))
 
 
 @pytest.mark.parametrize("waveform", ["jet", "sine"])
