@@ -3,7 +3,7 @@ most 2 s a frame in draft and 10 s in final quality).
 
     .venv/bin/python benchmarks/bench_render_purple.py [--duration 2] [--frames 4] [--threads 2]
 
-Simulates purple-jelly (80 drawn marginal threads, its preset's 10x interpolation, and 4 ribbon
+Simulates purple-jelly (its marginal threads drawn by its preset's interpolation, and 4 ribbon
 oral arms), writes the POV-Ray scenes of N frames spread over the run, and times each ``povray``
 call alone (wall time, ``--threads`` POV-Ray threads, one frame at a time): parsing and tracing,
 not the scene writing. Prints the seconds per frame (mean and worst), the scene's ribbon

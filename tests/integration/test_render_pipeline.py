@@ -177,9 +177,9 @@ def test_oral_arms_are_ribbons_on_a_manubrium_and_no_nan_is_drawn(purple: jellys
     jelly = members[1].frame(1)
     marginal, arms = jelly.groups
     assert (marginal.look.form, arms.look.form) == ("thread", "ribbon")
-    assert marginal.positions.shape == (80, 41, 3) and arms.positions.shape == (4, 21, 3)
+    assert marginal.positions.shape == (32, 41, 3) and arms.positions.shape == (4, 25, 3)
     assert np.isfinite(marginal.positions).all() and np.isfinite(arms.positions).all()
-    assert arms.first == 80
+    assert arms.first == 32
     # The manubrium reaches from inside the bell down to the arms' roots.
     stalk = jelly.manubrium
     assert stalk is not None and jelly.bell_vertices is not None and jelly.centre is not None

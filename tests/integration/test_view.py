@@ -195,27 +195,27 @@ def test_groups_are_described_and_sent_each_of_its_own_length(
     purple: jellysim.Result, purple_view: ViewServer
 ) -> None:
     """meta.json lists the groups; a tentacle frame holds the marginal threads interpolated
-    (their own 41 particles) then the four arms as simulated (their own 21), no NaN."""
+    (their own 41 particles) then the four arms as simulated (their own 25), no NaN."""
     meta = json.loads(get(purple_view, "/meta.json"))["tentacles"]
     groups = meta["groups"]
     assert [(g["name"], g["form"], g["particles"], g["simulated"]) for g in groups] == [
         ("marginal", "thread", 41, 8),
-        ("oral_arms", "ribbon", 21, 4),
+        ("oral_arms", "ribbon", 25, 4),
     ]
     assert groups[1]["color"] == list(ARMS_COLOR)
     assert groups[0]["color"] == list(purple.scene.groups[0].tentacles.color)
     assert groups[1]["width"] == purple.scene.groups[1].tentacles.ribbon_width
-    assert meta["interpolation"] == 10  # the thread group's own
+    assert meta["interpolation"] == 4  # the thread group's own
     factor, count = 3, purple.frames
     body = get(purple_view, f"/frames?part=tentacles&start=0&count={count}&interpolation={factor}")
-    threads, arms = 8 * factor * 41 * 3, 4 * 21 * 3
+    threads, arms = 8 * factor * 41 * 3, 4 * 25 * 3
     data = floats(body, count, threads + arms)
     assert np.isfinite(data).all()
     drawn = interpolate_groups(purple, factor)
     np.testing.assert_allclose(
         data[:, :threads], drawn[0].positions.reshape(count, -1), rtol=0, atol=1e-6
     )
-    simulated = purple.read(fields.TENTACLE_POSITION)[:, 8:12, :21]
+    simulated = purple.read(fields.TENTACLE_POSITION)[:, 8:12, :25]
     np.testing.assert_allclose(data[:, threads:], simulated.reshape(count, -1), atol=1e-6)
 
 
@@ -450,8 +450,8 @@ def test_the_page_draws_each_group_in_its_colour(
     )
     assert done.returncode == 0, done.stdout + done.stderr
     (page,) = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
-    # 8 x 10 threads and 4 arms, then 8 x 3 threads and the same 4 arms.
-    assert page["drawnTentacles"] == [8 * 10 + 4, 8 * 3 + 4]
+    # 8 x 4 threads (the preset's interpolation) and 4 arms, then 8 x 3 threads and the same 4.
+    assert page["drawnTentacles"] == [8 * 4 + 4, 8 * 3 + 4]
     pixels = np.asarray(Image.open(page["screenshot"]).convert("RGB")).astype(np.int64)
     r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
     green = (g > 60) & (g > 2 * r) & (g > 2 * b)
