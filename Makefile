@@ -79,13 +79,17 @@ tbb:
 
 # The main job: simulate the brown-jelly preset, draw its figures and render its movie.
 demo: $(BIN)/jellysim povray web
-	$(BIN)/jellysim run brown-jelly --out $(OUT)/brown-jelly --force
-	$(BIN)/jellysim plot $(OUT)/brown-jelly
-	$(BIN)/jellysim render $(OUT)/brown-jelly --force
+	$(BIN)/jellysim run purple-jelly --out $(OUT)/purple-jelly --force --set duration=6
+	$(BIN)/jellysim plot $(OUT)/purple-jelly
+	$(BIN)/jellysim render $(OUT)/purple-jelly --force
+	$(BIN)/jellysim render $(OUT)/purple-jelly --out $(OUT)/purple-jelly/poster --quality final \
+		--size 1280x960 --frames 150:151 --no-video --force
 	@echo
-	@echo "Result:  $(OUT)/brown-jelly/result.h5 (resolved scene: $(OUT)/brown-jelly/scene.toml)"
-	@echo "Figures: $(OUT)/brown-jelly/plots/"
-	@echo "Movie:   $(OUT)/brown-jelly/render/movie.mp4"
+	@echo "Result:  $(OUT)/purple-jelly/result.h5 (resolved scene: $(OUT)/purple-jelly/scene.toml)"
+	@echo "Figures: $(OUT)/purple-jelly/plots/"
+	@echo "Movie:   $(OUT)/purple-jelly/render/movie.mp4 (draft quality, 6 s)"
+	@echo "Poster:  $(OUT)/purple-jelly/poster/frames/frame_00150.png (final quality)"
+	@echo "Play it: $(BIN)/jellysim view $(OUT)/purple-jelly"
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
 test: $(BIN)/jellysim povray web chromium tbb
