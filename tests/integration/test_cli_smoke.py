@@ -176,7 +176,8 @@ def test_force_replaces_a_result(tmp_path: Path) -> None:
 def test_invalid_set_exits_2_and_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "never"
     for bad, key in [
-        ("tentacles.count=0", "tentacles.count"),
+        # the shared count reaches the marginal group (the oral arms set their own): its name
+        ("tentacles.count=0", "tentacles.marginal.count"),
         ("tentacles.bending=ewnig", "tentacles.bending"),
         ("tentacles.colour=red", "tentacles.colour"),
     ]:
@@ -225,8 +226,8 @@ def test_api_overrides_as_dict_and_as_strings(tmp_path: Path) -> None:
     path.write_text(jellysim.scene_to_toml(as_dict), encoding="utf-8")
     assert jellysim.load_scene(path) == as_dict
     assert jellysim.load_scene(str(path)) == as_dict
-    with pytest.raises(jellysim.InputError, match="tentacles.count"):
-        jellysim.load_scene("brown-jelly", {"tentacles.count": 0})
+    with pytest.raises(jellysim.InputError, match=r"tentacles\.marginal\.count = 0"):
+        jellysim.load_scene("brown-jelly", {"tentacles.count": 0})  # the arms set their own
 
 
 def test_api_run_and_open_result(tmp_path: Path) -> None:
@@ -243,7 +244,8 @@ def test_api_run_and_open_result(tmp_path: Path) -> None:
     with jellysim.open_result(tmp_path / "a") as a, jellysim.open_result(tmp_path / "b") as b:
         assert a.scene == b.scene == scene
         assert np.array_equal(a.tentacle_positions, b.tentacle_positions)
-        assert a.tentacle_positions.shape == (scene.frame_count, 2, 20, 3)
+        # the two marginal tentacles, then the four oral arms (which set their own count)
+        assert a.tentacle_positions.shape == (scene.frame_count, 2 + 4, 20, 3)
         assert a.time.shape == a.rim.shape[:1] == a.margin.shape[:1] == (scene.frame_count,)
         handle = a.file
     assert not handle.id.valid

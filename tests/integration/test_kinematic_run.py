@@ -101,15 +101,21 @@ def test_a_bell_without_contraction_holds_still_and_its_tentacles_hang(tmp_path:
         # Straight at rest: the preset's curl would coil the slack tentacles (issue 25).
         "tentacles.rest_curvature": 0.0,
         "tentacles.rest_curvature_tip": 0.0,
+        "tentacles.oral_arms.rest_curvature": 0.0,  # the arms set their own curl
+        "tentacles.oral_arms.rest_curvature_tip": 0.0,
+        "tentacles.oral_arms.rest_torsion": 0.0,
     }
     result = jellysim.run("brown-jelly", tmp_path, overrides=overrides)
     positions = result.tentacle_positions
     np.testing.assert_allclose(
         positions, np.broadcast_to(positions[:1], positions.shape), atol=1e-9
     )
-    spacing = result.scene.tentacles.spacing
-    hanging = np.broadcast_to(-spacing * np.arange(positions.shape[2]), positions.shape[1:3])
-    np.testing.assert_allclose(positions[-1, :, :, 2], hanging, atol=1e-9)
+    # Both groups hang straight down from their roots (the margin, the mouth: z = 0).
+    for group in result.scene.tentacle_groups:
+        own = result.group_positions(group.name)
+        spacing = group.tentacles.spacing
+        hanging = np.broadcast_to(-spacing * np.arange(own.shape[2]), own.shape[1:3])
+        np.testing.assert_allclose(own[-1, :, :, 2], hanging, atol=1e-9)
     vertices = result.file[fields.BELL_SURFACE_VERTICES.path][:]
     np.testing.assert_array_equal(vertices, np.broadcast_to(vertices[:1], vertices.shape))
 

@@ -39,7 +39,10 @@ NUMBER = r"-?[\d.]+(?:e-?\d+)?"
 @pytest.fixture(scope="module")
 def brown(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
     folder = tmp_path_factory.mktemp("brown")
-    return jellysim.run("brown-jelly", folder, overrides={"duration": 0.2, "fps": 10.0})
+    # brown-jelly's marginal tentacles alone: one group, whose exports name their part
+    # "tentacles" (a grouped result's parts are named by group: test_export_groups.py)
+    scene = jellysim.load_scene("brown-jelly", {"duration": 0.2, "fps": 10.0}).group_scene(0)
+    return jellysim.run(scene, folder)
 
 
 @pytest.fixture(scope="module")

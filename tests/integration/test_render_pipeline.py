@@ -142,7 +142,14 @@ def purple(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
     return jellysim.run("purple-jelly", folder, overrides={"duration": 0.3, "fps": 10.0})
 
 
-def test_a_one_group_result_draws_as_before_groups(brown: jellysim.Result) -> None:
+@pytest.fixture(scope="module")
+def one_group(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
+    """brown-jelly's marginal tentacles alone (its oral arms are a second group): one group."""
+    scene = jellysim.load_scene("brown-jelly", {"duration": 0.5, "fps": 12.0}).group_scene(0)
+    return jellysim.run(scene, tmp_path_factory.mktemp("one-group"))
+
+
+def test_a_one_group_result_draws_as_before_groups(one_group: jellysim.Result) -> None:
     """The pipeline's groups against the path it replaced: the whole result's drawn tentacles
     in the jellyfish's own look (Jellyfish.tentacles), the text byte for byte."""
     from dataclasses import replace
@@ -151,10 +158,10 @@ def test_a_one_group_result_draws_as_before_groups(brown: jellysim.Result) -> No
     from jellysim.render.frame import Frame
     from jellysim.render.pipeline import frame_cameras
 
-    (member,) = make_members([brown], 1, None, 0, fluid=False)
-    cameras, extent, _ = frame_cameras([member], brown.frames, (64, 48), "auto")
-    drawn = interpolate_result(brown)
-    for index in (0, brown.frames - 1):
+    (member,) = make_members([one_group], 1, None, 0, fluid=False)
+    cameras, extent, _ = frame_cameras([member], one_group.frames, (64, 48), "auto")
+    drawn = interpolate_result(one_group)
+    for index in (0, one_group.frames - 1):
         new = member.frame(index)
         old = replace(new, tentacles=drawn[index], groups=(), centre=None)
         for quality in povray.QUALITIES.values():

@@ -102,7 +102,8 @@ def test_a_school_and_the_room_render(brown: jellysim.Result, tmp_path: Path) ->
     )
     assert done["rendered"] == 1
     text = (out / "pov" / "frame_00000.pov").read_text()
-    assert text.count("mesh2 {") == 3 and "checker" in text  # three bells, the tiled floor
+    # three bells and the three jellyfish's oral arms (one ribbon mesh2 each), the tiled floor
+    assert text.count("mesh2 {") == 3 * 2 and "checker" in text
     members = make_members([brown], 3, None, 0)
     offsets = np.array([m.offset for m in members])
     assert np.linalg.norm(offsets[0] - offsets[1]) > 0.5 * 0.3  # spread apart

@@ -44,7 +44,9 @@ THREE_PATHS = (
 @pytest.fixture(scope="module")
 def brown(tmp_path_factory: pytest.TempPathFactory) -> Iterator[jellysim.Result]:
     folder = tmp_path_factory.mktemp("brown")
-    result = jellysim.run("brown-jelly", folder, overrides={"duration": 0.6, "fps": 20.0})
+    # brown-jelly's marginal tentacles alone: the one-group viewer (purple below has groups)
+    scene = jellysim.load_scene("brown-jelly", {"duration": 0.6, "fps": 20.0}).group_scene(0)
+    result = jellysim.run(scene, folder)
     yield result
     result.close()
 

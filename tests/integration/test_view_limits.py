@@ -20,13 +20,15 @@ import jellysim
 from jellysim.view.server import TOKEN_HEADER, FrameRequest, ViewLimits, ViewServer
 
 FACTOR = 50  # drawn tentacles per simulated one: the brown jelly's largest
-SIMULATED, PARTICLES = 6, 90  # brown-jelly's tentacles (0.9 m since issue 25's retune)
+SIMULATED, PARTICLES = 6, 90  # brown-jelly's marginal tentacles (0.9 m since issue 25's retune)
 
 
 @pytest.fixture(scope="module")
 def brown(tmp_path_factory: pytest.TempPathFactory) -> Iterator[jellysim.Result]:
+    # brown-jelly's marginal tentacles alone (its oral arms are a second group)
     folder = tmp_path_factory.mktemp("brown")
-    result = jellysim.run("brown-jelly", folder, overrides={"duration": 0.6, "fps": 20.0})
+    scene = jellysim.load_scene("brown-jelly", {"duration": 0.6, "fps": 20.0}).group_scene(0)
+    result = jellysim.run(scene, folder)
     yield result
     result.close()
 

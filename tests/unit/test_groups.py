@@ -121,7 +121,7 @@ def test_bad_group_input_names_the_key(overrides: dict, message: str) -> None:
 
 def test_set_on_a_one_table_scene_names_no_group() -> None:
     with pytest.raises(InputError, match="has no tentacle group 'arms'"):
-        load_scene("brown-jelly", {"tentacles.arms.count": 4})
+        load_scene(load_scene("brown-jelly").group_scene(0), {"tentacles.arms.count": 4})
 
 
 def test_a_shared_key_every_group_sets_is_refused() -> None:
@@ -145,7 +145,7 @@ def test_bad_group_tables(groups: dict, message: str) -> None:
 
 def test_even_layout_is_the_one_table_scenes() -> None:
     # The bell models placed root k at 2 pi k / T; the layout gives the same numbers bit for bit.
-    scene = load_scene("brown-jelly")
+    scene = load_scene("brown-jelly").group_scene(0)  # its marginal tentacles: one table
     count = scene.tentacles.count
     np.testing.assert_array_equal(root_layout(scene).angles, 2.0 * np.pi * np.arange(count) / count)
     assert root_layout(scene).default

@@ -21,8 +21,10 @@ from jellysim.tentacle.model import rest_second_differences
 
 @pytest.fixture(scope="module")
 def brown(tmp_path_factory):
+    # brown-jelly's marginal tentacles alone: one ring round the margin, no oral arms
     folder = tmp_path_factory.mktemp("brown")
-    return jellysim.run("brown-jelly", folder, overrides={"duration": 3.0})
+    scene = jellysim.load_scene("brown-jelly", {"duration": 3.0}).group_scene(0)
+    return jellysim.run(scene, folder)
 
 
 def test_cosine_weights_as_data():
@@ -275,7 +277,8 @@ def test_a_curled_scene_blends_curvatures_and_a_straight_one_positions(brown):
         positions, margin, brown.time, 3, brown.scene.tentacles.spacing, lag_spread=lag
     )
     straight_scene = jellysim.load_scene(
-        brown.scene, {"tentacles.rest_curvature": 0.0, "tentacles.rest_curvature_tip": 0.0}
+        brown.scene,
+        {"tentacles.rest_curvature": 0.0, "tentacles.rest_curvature_tip": 0.0},
     )
     as_straight = SimpleNamespace(scene=straight_scene, time=brown.time, read=brown.read)
     np.testing.assert_array_equal(interpolate_result(as_straight, 3), straight)
