@@ -23,6 +23,8 @@ from jellysim.studies import sweep
 EXPECTED_LOOP = {
     "brown-jelly": "tentacles",
     "forced-tentacles": "tentacles",
+    "purple-jelly": "tentacles",
+    "lions-mane": "tentacles",
     "dam-break-2d": "fluid",
     "hydrostatic-2d": "fluid",
     "hydrostatic-3d": "fluid",

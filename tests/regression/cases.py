@@ -17,6 +17,9 @@ _DAM_COARSE: dict[str, object] = {"fluid.spacing": 0.01, "duration": 0.015, "fps
 CASES: dict[str, tuple[str, dict[str, object]]] = {
     "brown-jelly": ("brown-jelly", {"duration": 0.1}),
     "forced-tentacles": ("forced-tentacles", {"duration": 0.1}),
+    # Tentacle groups of different chains (NaN-padded), oral arms on the mouth circle, clusters.
+    "purple-jelly": ("purple-jelly", {"duration": 0.1}),
+    "lions-mane": ("lions-mane", {"duration": 0.1, "tentacles.mane.count": 64}),
     "forced-pinned-ewing": (
         "forced-tentacles",
         {"duration": 0.1, "tentacles.root": "pinned", "tentacles.bending": "ewing"},
