@@ -95,7 +95,10 @@ def _parser() -> argparse.ArgumentParser:
         "--school", type=int, default=1, metavar="N", help="N jellyfish from the result(s)"
     )
     render.add_argument(
-        "--interpolation", type=int, metavar="N", help="drawn tentacles per simulated one"
+        "--interpolation",
+        type=int,
+        metavar="N",
+        help="drawn tentacles per simulated one (thread groups; oral-arm ribbons keep their own)",
     )
     render.add_argument(
         "--fluid",
@@ -129,7 +132,10 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("--frames", metavar="A:B", help="frames A to B-1 only")
     export.add_argument("--every", type=int, default=1, metavar="K", help="every K-th frame")
     export.add_argument(
-        "--interpolation", type=int, metavar="N", help="drawn tentacles per simulated one"
+        "--interpolation",
+        type=int,
+        metavar="N",
+        help="drawn tentacles per simulated one (thread groups; oral-arm ribbons keep their own)",
     )
 
     view = sub.add_parser("view", help="play a result in the web browser (a local web page)")

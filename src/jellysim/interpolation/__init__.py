@@ -404,7 +404,8 @@ def interpolate_groups(
     """Drawn tentacles of an open result, group by group (docs/groups.md).
 
     Each group is interpolated on its own, never blended with another: with its own
-    ``interpolation`` (``factor`` overrides every group's), its own particle count, its roots'
+    ``interpolation`` (``factor`` overrides every thread group's; ribbon groups, oral arms,
+    keep their own), its own particle count, its roots'
     ring (the margin, or for oral arms the circle through their roots), and in clusters each
     cluster as an open row (no tentacles drawn in the gaps between clusters). ``lag`` and
     ``frames`` as :func:`interpolate_result`.
@@ -429,7 +430,9 @@ def interpolate_groups(
         own = positions[:, rows, : t.particles]
         ring = _mouth_circle(margin, own[:, :, 0]) if t.placement == "mouth" else margin
         curled = bool(np.any(rest_shape_for(scene.group_scene(index)) != 0.0))
-        f = t.interpolation if factor is None else factor
+        # ``factor`` (render --interpolation) multiplies threads; ribbons (oral arms) keep their
+        # group's own count: a frilled curtain per arm, not fifty.
+        f = t.interpolation if factor is None or t.form == "ribbon" else factor
         sizes = _clusters(t)
         parts = []
         edge = 0
