@@ -93,7 +93,7 @@ demo: $(BIN)/jellysim povray web
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
 test: $(BIN)/jellysim povray web chromium tbb
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=25
 
 # Every test, slow ones included.
 test-all: $(BIN)/jellysim povray web chromium tbb

@@ -16,7 +16,10 @@ changes:
   on ``PYTHONPATH``;
 - ``run`` and ``sweep`` get ``--set duration=0.004 --set fps=F`` appended (``F`` gives 3 frames,
   or as many as the documented ``--frames A:B`` of a command that reads the folder need, at most
-  5,000 a second), and the Python examples' ``jellysim.load_scene`` applies the same overrides;
+  5,000 a second), and the Python examples' ``jellysim.load_scene`` applies the same overrides; a
+  folder handed to a reading example is run for that example's own ``--frames`` (3 frames where
+  it names none), so a render of a whole result renders 3 frames, not the 141 that another
+  example's ``--frames 140:141`` needs;
 - ``DIR``, ``DIR1``, ``DIR2`` (docs/rendering.md) stand for documented result folders;
   ``--port 8000`` becomes a free port; ``view`` finds a ``BROWSER`` that records the address, and
   is stopped with SIGINT (Ctrl-C, as documented) once the page and the result's metadata were
@@ -336,6 +339,16 @@ def frames_for(folder: str | None) -> int:
     return max([MIN_FRAMES, *needed])
 
 
+def frames_read(example: Example, folder: str) -> int:
+    """Frames ``example``'s own commands need of the folder they read: 3, or their ``--frames``."""
+    try:
+        parsed = commands(example) if example.kind != "python" else []
+    except AssertionError:
+        parsed = []
+    needed = [command.frames_needed() for command in parsed if folder in command.reads()]
+    return max([MIN_FRAMES, *needed])
+
+
 def tiny(frames: int) -> tuple[float, float]:
     """(duration s, fps) of a tiny run of ``frames`` frames."""
     duration = max(TINY_DURATION, (frames - 1) / MAX_FPS)
@@ -394,8 +407,8 @@ class Workspace:
             env=self.env,
         )
 
-    def folder_for(self, example: Example) -> Path:
-        slug = re.sub(r"\W+", "-", example.where)
+    def folder_for(self, example: Example, frames: int | None = None) -> Path:
+        slug = re.sub(r"\W+", "-", example.where) + ("" if frames is None else f"-{frames}")
         folder = self.root / slug
         folder.mkdir()
         return folder
@@ -409,27 +422,30 @@ class Workspace:
             f"{reader.where} reads {folder}, which no documented 'jellysim run' writes"
         )
         assert source != reader, f"{reader.where} reads {folder} before writing it"
-        ran = self.run(source)
+        ran = self.run(source, frames_read(reader, folder))
         assert not ran.failure, f"{folder} comes from {source.where}, which failed: {ran.failure}"
         (cwd / folder).mkdir(parents=True)
         for name in ("result.h5", "scene.toml"):
             shutil.copy2(ran.cwd / folder / name, cwd / folder / name)
 
-    def run(self, example: Example) -> Ran:
-        if example.where not in self.ran:
-            cwd = self.folder_for(example)
+    def run(self, example: Example, frames: int | None = None) -> Ran:
+        """Run ``example`` once; its runs last ``frames`` frames where given (a provider run for
+        a reader), else as many as any documented reader of their folder needs."""
+        key = example.where if frames is None else f"{example.where}@{frames}"
+        if key not in self.ran:
+            cwd = self.folder_for(example, frames)
             ran = Ran(cwd)
-            self.ran[example.where] = ran
+            self.ran[key] = ran
             try:
                 if example.kind == "python":
                     self.run_python(example, ran)
                 else:
-                    self.run_shell(example, ran)
+                    self.run_shell(example, ran, frames)
             except AssertionError as error:
                 ran.failure = str(error)
-        return self.ran[example.where]
+        return self.ran[key]
 
-    def run_shell(self, example: Example, ran: Ran) -> None:
+    def run_shell(self, example: Example, ran: Ran, frames: int | None = None) -> None:
         for name, argv in INPUT_FILES.items():
             if name in example.text.split():
                 shown = self.cli(argv, ran.cwd)
@@ -442,7 +458,7 @@ class Workspace:
             if "--port" in argv:
                 argv[argv.index("--port") + 1] = str(free_port())
             if command.name in ("run", "sweep"):
-                argv += tiny_options(frames_for(command.writes()))
+                argv += tiny_options(frames or frames_for(command.writes()))
             if command.name == "view":
                 printed = self.view(argv, ran.cwd)
             else:
