@@ -5,11 +5,30 @@ wide and 5 l0 tall (448 particles) in a 22 x 22 x 18 l0 tank filled 15 l0 deep. 
 duration, frame rate, tentacles and material they need.
 
 ``SWIM``: SMALL_MOON for three 2 s pulses (``SWIM_PERIOD``) at 10 frames a second with two
-tentacles and k = 31.25 N/m (20 N/m x 0.25 / 0.16, the preset's material at this spacing);
-``MUSCLE_OFF`` the muscle neither contracting nor stiffening, ``SWIM_OFF`` SWIM with it.
+marginal tentacles (and the preset's four oral arms) and k = 31.25 N/m (20 N/m x 0.25 / 0.16,
+the preset's material at this spacing); ``MUSCLE_OFF`` the muscle neither contracting nor
+stiffening, ``SWIM_OFF`` SWIM with it.
+
+``one_table(preset)``: a grouped preset's tree with its tentacles as one ``[tentacles]`` table of
+the shared keys (the moon-jelly presets before issue 25 gave them oral arms: the scene that
+older stored results and checkpoints were made from).
 """
 
 from __future__ import annotations
+
+from typing import Any
+
+from jellysim.config.scenes import scene_source_tree
+
+
+def one_table(preset: str) -> dict[str, Any]:
+    """``preset``'s tree with only the shared ``[tentacles]`` keys: its groups dropped."""
+    tree = dict(scene_source_tree(preset))
+    tree["tentacles"] = {
+        key: value for key, value in tree["tentacles"].items() if not isinstance(value, dict)
+    }
+    return tree
+
 
 SMALL_MOON: dict[str, object] = {
     "fluid.spacing": 0.25,

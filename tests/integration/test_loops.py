@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scenes
-from regression.cases import CASES
+from regression.cases import CASES, preset_of
 from regression.compare import REFERENCE_FOLDER
 
 import jellysim
@@ -38,14 +38,15 @@ FRAMES = 2
 
 def test_every_preset_has_a_loop_and_a_reference_case() -> None:
     assert set(EXPECTED_LOOP) == set(jellysim.preset_names())
-    assert {preset for preset, _ in CASES.values()} == set(EXPECTED_LOOP)
+    assert {preset_of(source) for source, _ in CASES.values()} == set(EXPECTED_LOOP)
     assert set(LOOPS) == {"tentacles", "fluid", "soft-bell"}
 
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_simulation_steps_any_scene_like_a_run(name: str) -> None:
-    preset, overrides = CASES[name]
-    scene = jellysim.load_scene(preset, overrides)
+    source, overrides = CASES[name]
+    preset = preset_of(source)
+    scene = jellysim.load_scene(source, overrides)
     loop = jellysim.Simulation(scene)
     assert isinstance(loop, jellysim.Simulation)
     assert isinstance(loop, LOOPS[EXPECTED_LOOP[preset]])

@@ -1,20 +1,22 @@
 """The reference runs that gate behaviour-preserving work (issue 23): every preset, shrunk to a few
 coarse frames, and the scene-schema choices the presets do not exercise.
 
-Each case is a preset name and the overrides that shrink it. ``make_reference.py`` stores every
-dataset and root attribute of each case's ``result.h5`` under ``reference/``;
-``test_reference_runs.py`` re-runs the cases and compares them bit for bit.
+Each case is a preset name (or a scene tree) and the overrides that shrink it.
+``make_reference.py`` stores every dataset and root attribute of each case's ``result.h5``
+under ``reference/``; ``test_reference_runs.py`` re-runs the cases and compares them bit for bit.
 """
 
 from __future__ import annotations
 
-from scenes import SMALL_MOON
+from typing import Any
+
+from scenes import SMALL_MOON, one_table
 
 # A few frames of the soft bell at the tests' coarse scale (l0 = 0.25 m, 448 bell particles).
 _MOON_SHORT: dict[str, object] = {**SMALL_MOON, "duration": 0.2, "fps": 10.0}
 _DAM_COARSE: dict[str, object] = {"fluid.spacing": 0.01, "duration": 0.015, "fps": 200.0}
 
-CASES: dict[str, tuple[str, dict[str, object]]] = {
+CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
     "brown-jelly": ("brown-jelly", {"duration": 0.1}),
     "forced-tentacles": ("forced-tentacles", {"duration": 0.1}),
     # Tentacle groups of different chains (NaN-padded), oral arms on the mouth circle, clusters.
@@ -41,7 +43,8 @@ CASES: dict[str, tuple[str, dict[str, object]]] = {
     "hydrostatic-3d": ("hydrostatic-3d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
     "tank-3d": ("tank-3d", {"fluid.spacing": 0.025, "duration": 0.04, "fps": 50.0}),
     "moon-jelly": ("moon-jelly", _MOON_SHORT),
-    "moon-jelly-no-tentacles": ("moon-jelly", {**_MOON_SHORT, "tentacles.count": 0}),
+    # The bell alone: the preset's tentacles as one table (its oral arms dropped), none of them.
+    "moon-jelly-no-tentacles": (one_table("moon-jelly"), {**_MOON_SHORT, "tentacles.count": 0}),
     "moon-jelly-implicit": (
         "moon-jelly",
         {**_MOON_SHORT, "bell.spring_integration": "implicit", "tentacles.count": 3},
@@ -52,3 +55,8 @@ CASES: dict[str, tuple[str, dict[str, object]]] = {
         {"duration": 0.1, "fps": 20.0, "tentacles.count": 4},
     ),
 }
+
+
+def preset_of(source: str | dict[str, Any]) -> str:
+    """The preset a case's source is, or was made from (a tree's ``name``)."""
+    return source if isinstance(source, str) else str(source["name"])

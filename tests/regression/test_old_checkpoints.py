@@ -14,22 +14,24 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import scenes
+from scenes import one_table
 
 import jellysim
 from regression.compare import differences, read_all
 
 OLD = Path(__file__).resolve().parent / "old_checkpoints"
-CASES: dict[str, tuple[str, dict[str, object]]] = {
+CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
     "forced-tentacles": (
         "forced-tentacles",
         {"duration": 0.2, "tentacles.count": 2, "solver.checkpoint_every": 2},
     ),
-    "moon-jelly": (
-        "moon-jelly",
+    "moon-jelly": (  # the preset as it was: one [tentacles] table, no oral arms
+        one_table("moon-jelly"),
         {
             **scenes.SMALL_MOON,
             "duration": 0.4,

@@ -22,6 +22,7 @@ from jellysim.tentacle.layout import RootLayout
 from jellysim.tentacle.roots import Forcing
 
 MARGIN_SMOOTHING = 1.5  # l0: standard deviation of the Gaussian along the margin arc
+SAMPLE_SNAP = 1.0e-9  # of the sample step: a root angle this close to a sample takes the sample
 
 
 class Record(NamedTuple):
@@ -130,17 +131,25 @@ class RecordedMargin:
     def _placed(
         self, margin: np.ndarray, velocity: np.ndarray, directions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Roots, their velocities and clamp directions (T, 3) at the layout's places."""
+        """Roots, their velocities and clamp directions (T, 3) at the layout's places.
+
+        A root whose angle falls on a sample (within 1e-9 of the sample step, as the even
+        margin roots do) takes that sample itself, as one default group does: a group's roots
+        are then the same bits whatever other groups the jellyfish carries."""
         layout = self.layout
         step = 2.0 * np.pi / self.sectors
         x = np.mod(layout.angles, 2.0 * np.pi) / step
-        j = np.floor(x).astype(np.int64) % self.sectors
-        w = (x - np.floor(x))[:, None]
+        on_sample = np.abs(x - np.rint(x)) < SAMPLE_SNAP
+        below = np.where(on_sample, np.rint(x), np.floor(x))
+        j = below.astype(np.int64) % self.sectors
+        w = np.where(on_sample, 0.0, x - below)[:, None]
         k = (j + 1) % self.sectors
         roots = (1.0 - w) * margin[j] + w * margin[k]
         root_velocities = (1.0 - w) * velocity[j] + w * velocity[k]
         d = (1.0 - w) * directions[j] + w * directions[k]
-        root_directions = d / np.linalg.norm(d, axis=1)[:, None]
+        root_directions = np.where(
+            on_sample[:, None], directions[j], d / np.linalg.norm(d, axis=1)[:, None]
+        )
         m = layout.mouth
         if np.any(m):
             centre = margin.mean(axis=0)

@@ -4,10 +4,8 @@ ribbon meshes.
 
 A group's drawn tentacles come from :func:`jellysim.interpolation.interpolate_groups`, trimmed
 to the group's own particle count, so the NaN rows of a padded result never reach a file. Its
-look falls back to ``[look]`` key by key: ``color`` to ``tentacle_color``, ``drawn_radius`` to
-``tentacle_radius``, ``taper`` to ``tentacle_taper``; a ribbon's ``ribbon_width`` to 4
-``spacing``, ``ruffles`` to ``1 / (2 ribbon_width)``, ``ruffle_depth`` to
-:data:`DEFAULT_RUFFLE_DEPTH` (the schema's documented defaults).
+look is :func:`jellysim.render.materials.group_look`'s, the one resolution that POV-Ray, the
+preview and the viewer share: ``[look]`` key by key under the group's own keys.
 
 A one-group scene's group keeps the part name ``tentacles`` and, unless it sets ``color``, the
 material :func:`jellysim.render.materials.tentacle_material` gives, so its files are as before
@@ -23,13 +21,10 @@ from typing import NamedTuple
 import numpy as np
 
 from jellysim import fields
-from jellysim.config.schema import Tentacles
 from jellysim.io.result import Result
 from jellysim.render.frame import Look
-from jellysim.render.materials import Material, tentacle_material
+from jellysim.render.materials import Material, group_look, tentacle_material
 
-DEFAULT_RUFFLE_DEPTH = 0.3  # a ribbon's ruffle_depth when unset (schema: "unset: 0.3")
-RIBBON_WIDTH_SPACINGS = 4.0  # a ribbon's width when unset, in particle spacings
 ARM_PHASE = 2.399963  # rad: arm k's ruffles are shifted by k times this (the golden angle)
 
 
@@ -104,32 +99,6 @@ class ExportGroup:
         return ArmsMesh(*(np.concatenate(a) for a in (vertices, faces, normals, arm)))
 
 
-class GroupLook(NamedTuple):
-    """How a group is drawn, its keys resolved against ``[look]``: ``color`` linear RGB,
-    ``radius`` m and ``taper`` (a thread's root radius, tip / root), ``width`` m at the root,
-    ``ruffles`` per m and ``ruffle_depth`` (a ribbon's)."""
-
-    color: tuple[float, float, float]
-    radius: float
-    taper: float
-    width: float
-    ruffles: float
-    ruffle_depth: float
-
-
-def export_look(look: Look, t: Tentacles) -> GroupLook:
-    """The group ``t``'s look, each key unset falling back to ``look`` or its default."""
-    width = RIBBON_WIDTH_SPACINGS * t.spacing if t.ribbon_width is None else t.ribbon_width
-    return GroupLook(
-        color=look.tentacle_color if t.color is None else tuple(map(float, t.color)),  # type: ignore[arg-type]
-        radius=float(look.tentacle_radius if t.drawn_radius is None else t.drawn_radius),
-        taper=float(look.tentacle_taper if t.taper is None else t.taper),
-        width=float(width),
-        ruffles=1.0 / (2.0 * width) if t.ruffles is None else float(t.ruffles),
-        ruffle_depth=float(DEFAULT_RUFFLE_DEPTH if t.ruffle_depth is None else t.ruffle_depth),
-    )
-
-
 def group_material(look: Look, color: tuple[float, float, float], part: str) -> Material:
     """The shared tentacle material of ``look`` in the group's ``color``, named ``part`` (a
     one-group scene's: :func:`~jellysim.render.materials.tentacle_material` itself)."""
@@ -151,7 +120,7 @@ def export_groups(result: Result, look: Look, interpolation: int | None) -> list
     for g in drawn:
         t = g.tentacles
         part = f"tentacles_{g.name}" if several else "tentacles"
-        resolved = export_look(look, t)
+        resolved = group_look(look, t, g.name)
         out.append(
             ExportGroup(
                 name=g.name,
@@ -161,7 +130,7 @@ def export_groups(result: Result, look: Look, interpolation: int | None) -> list
                 material=group_material(look, resolved.color, part),
                 positions=g.positions,
                 radii=resolved.radius * np.linspace(1.0, resolved.taper, g.positions.shape[2]),
-                width=resolved.width,
+                width=resolved.ribbon_width,
                 taper=resolved.taper,
                 ruffles=resolved.ruffles,
                 ruffle_depth=resolved.ruffle_depth,

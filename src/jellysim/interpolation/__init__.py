@@ -386,7 +386,7 @@ def _mouth_circle(margin: np.ndarray, roots: np.ndarray) -> np.ndarray:
     return out
 
 
-def _clusters(t: Tentacles) -> list[int]:
+def cluster_sizes(t: Tentacles) -> list[int]:
     """Sizes of a group's clusters of roots (one closed ring unless arranged in clusters)."""
     if t.arrangement != "clusters" or t.angles is not None:
         return [t.count]
@@ -433,7 +433,7 @@ def interpolate_groups(
         # ``factor`` (render --interpolation) multiplies threads; ribbons (oral arms) keep their
         # group's own count: a frilled curtain per arm, not fifty.
         f = t.interpolation if factor is None or t.form == "ribbon" else factor
-        sizes = _clusters(t)
+        sizes = cluster_sizes(t)
         parts = []
         edge = 0
         for size in sizes:

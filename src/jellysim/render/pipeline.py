@@ -314,8 +314,18 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
     )
 
 
-def _shift_hue(color: tuple[float, float, float], turn: float) -> tuple[float, float, float]:
+SCHOOL_HUE = 0.04  # a school member's hue turns at most this much of the colour wheel (±14°) ...
+SCHOOL_LIGHTNESS = 0.15  # ... and its lightness by at most this fraction: one species, many shades
+SCHOOL_DROP = 0.45  # each row of a school hangs this much of the spacing lower than the one before
+
+
+def _shift_hue(
+    color: tuple[float, float, float], turn: float, lighten: float = 0.0
+) -> tuple[float, float, float]:
+    """``color`` with its hue turned by ``turn`` of the wheel and its lightness scaled by
+    ``1 + lighten`` (kept within [0, 1])."""
     h, lightness, s = colorsys.rgb_to_hls(*color)
+    lightness = min(1.0, max(0.0, lightness * (1.0 + lighten)))
     r, g, b = colorsys.hls_to_rgb((h + turn) % 1.0, lightness, s)
     return (r, g, b)
 
@@ -332,8 +342,8 @@ def make_members(
     fluid: bool = True,
 ) -> list[Member]:
     """The jellyfish to draw: every result once, or a school of ``school`` jellyfish cycling
-    through the results on a jittered grid with random phase shifts and hue shifts; their fluid
-    particles too when ``fluid``."""
+    through the results on a jittered grid (each row further back and lower), with random phase
+    shifts and small shifts of hue and lightness; their fluid particles too when ``fluid``."""
     drawn = [member_groups(r, interpolation, scene_look(r.scene, look_overrides)) for r in results]
     count = max(school, len(results))
     rng = np.random.default_rng(seed)
@@ -354,19 +364,25 @@ def make_members(
                 SCHOOL_SPACING
                 * size
                 * np.array(
-                    [column - (columns - 1) / 2 + jitter[0], row + jitter[1], 0.4 * jitter[2]]
+                    [
+                        column - (columns - 1) / 2 + jitter[0],
+                        row + jitter[1],
+                        -SCHOOL_DROP * row + 0.4 * jitter[2],
+                    ]
                 )
             )
             phase = int(rng.integers(0, result.frames))
             if index >= len(results):
-                turn = 0.618034 * index % 1.0 * 0.25 - 0.125  # within an eighth of the wheel
+                golden = 0.618034 * index % 1.0  # evenly spread over the members
+                turn = SCHOOL_HUE * (2.0 * golden - 1.0)
+                lighten = SCHOOL_LIGHTNESS * (2.0 * (0.618034 * golden * 7.0 % 1.0) - 1.0)
                 look = replace(
                     look,
-                    bell_color=_shift_hue(look.bell_color, turn),
-                    tentacle_color=_shift_hue(look.tentacle_color, turn),
+                    bell_color=_shift_hue(look.bell_color, turn, lighten),
+                    tentacle_color=_shift_hue(look.tentacle_color, turn, lighten),
                 )
                 groups = tuple(
-                    replace(g, look=replace(g.look, color=_shift_hue(g.look.color, turn)))
+                    replace(g, look=replace(g.look, color=_shift_hue(g.look.color, turn, lighten)))
                     for g in groups
                 )
         has_bell = result.has(fields.BELL_SURFACE_VERTICES)

@@ -152,7 +152,7 @@ class ViewGroup:
 
 def _view_groups(scene: Any) -> list[ViewGroup]:
     # The clusters as jellysim.interpolation draws them (its helper, one source of truth).
-    from jellysim.interpolation import _clusters
+    from jellysim.interpolation import cluster_sizes
     from jellysim.tentacle.layout import root_layout
 
     return [
@@ -160,7 +160,7 @@ def _view_groups(scene: Any) -> list[ViewGroup]:
             group.name,
             rows,
             int(group.tentacles.particles),
-            tuple(_clusters(group.tentacles)),
+            tuple(cluster_sizes(group.tentacles)),
             group.tentacles.form == "ribbon",
         )
         for group, rows in zip(scene.groups, root_layout(scene).slices(), strict=True)
@@ -291,12 +291,11 @@ class ResultData:
         (linear RGB: its colour, and seen face-on as a line, ``tentacle_face_color``),
         ``particles``, ``simulated``, ``clusters`` (sizes of its rows of roots, one: a ring),
         ``radius`` m and ``taper`` (threads), ``width`` m at the root (ribbons)."""
-        from jellysim.export.groups import export_look
-        from jellysim.render.materials import tentacle_face_color
+        from jellysim.render.materials import group_look, tentacle_face_color
 
         out = []
         for g, group in zip(self.groups, self.result.scene.groups, strict=True):
-            drawn = export_look(look, group.tentacles)
+            drawn = group_look(look, group.tentacles, g.name)
             out.append(
                 {
                     "name": g.name,
@@ -310,7 +309,7 @@ class ResultData:
                     "clusters": list(g.clusters),
                     "radius": drawn.radius,
                     "taper": drawn.taper,
-                    "width": drawn.width,
+                    "width": drawn.ribbon_width,
                 }
             )
         return out
