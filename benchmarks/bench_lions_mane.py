@@ -2,7 +2,7 @@
 arms, two tentacle groups, each with its own substep (issue 25).
 
     .venv/bin/python benchmarks/bench_lions_mane.py [--threads N] [--duration S] [--repeats R]
-        [--no-output]
+        [--no-output] [--parts]
 
 Each repeat runs ``jellysim.run("lions-mane", out=<temporary folder>)`` with output on
 (result.h5 written with every frame, the bell's mesh included, checkpoints as the preset sets
@@ -12,7 +12,9 @@ first, untimed frame compiles or loads the kernels), the CPU time of the process
 (all its threads), the particle-steps per second (simulated particles x substeps, summed over the
 groups, per wall second) and the load average at the end of the repeat; once, the frames and the
 substeps per frame of each group. On a machine whose cores other work shares, the wall time
-mostly measures that work; the CPU time does not.
+mostly measures that work; the CPU time does not. ``--parts`` adds one run without output that
+splits a frame's time (wall and CPU, ms) between each group's compiled kernel and the Python
+around it (roots, flow, rest-frame normals, watchdog).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import time
 import numba
 
 import jellysim
-from jellysim.simulation import Simulation
+from jellysim.simulation import Simulation, tentacles
 
 SCENE = "lions-mane"
 
@@ -56,12 +58,45 @@ def timed_run(duration: float, output: bool) -> tuple[float, float]:
     return time.perf_counter() - start, time.process_time() - cpu
 
 
+def parts(duration: float) -> None:
+    """Print the mean wall and CPU time per frame (ms) of each group's kernel call and of the rest
+    of ``step_frame``, over one run of ``duration`` simulated seconds without output."""
+    scene = jellysim.load_scene(SCENE, {"duration": duration})
+    simulation = Simulation(scene)
+    simulation.prepare()
+    names = {id(g.positions): g.name for g in simulation.groups}  # type: ignore[attr-defined]
+    spent = {name: [0.0, 0.0] for name in names.values()}
+    kernel = tentacles.advance_frame
+
+    def timed_kernel(*args: object) -> None:
+        start, cpu = time.perf_counter(), time.process_time()
+        kernel(*args)
+        total = spent[names[id(args[0])]]
+        total[0] += time.perf_counter() - start
+        total[1] += time.process_time() - cpu
+
+    frames = scene.frame_count - 1
+    tentacles.advance_frame = timed_kernel  # type: ignore[assignment]
+    try:
+        start, cpu = time.perf_counter(), time.process_time()
+        for _ in range(frames):
+            simulation.step_frame()
+        wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    finally:
+        tentacles.advance_frame = kernel  # type: ignore[assignment]
+    rest = [wall - sum(t[0] for t in spent.values()), cpu - sum(t[1] for t in spent.values())]
+    print(f"per frame, {frames} frames without output: {'wall [ms]':>10} {'CPU [ms]':>9}")
+    for name, (w, c) in [*((f"kernel {n}", t) for n, t in spent.items()), ("rest", rest)]:
+        print(f"  {name:<36} {1e3 * w / frames:>10.2f} {1e3 * c / frames:>9.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--threads", type=int, default=numba.config.NUMBA_NUM_THREADS)
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-output", action="store_true", help="step frames, write nothing")
+    parser.add_argument("--parts", action="store_true", help="split a frame: kernels and Python")
     args = parser.parse_args()
     numba.set_num_threads(args.threads)
 
@@ -93,6 +128,8 @@ def main() -> None:
         wall, cpu = timed_run(args.duration, not args.no_output)
         load = os.getloadavg()[0]
         print(f"{repeat:>6d} {wall:>9.2f} {cpu:>8.2f} {work / wall:>17.3g} {load:>13.2f}")
+    if args.parts:
+        parts(args.duration)
 
 
 if __name__ == "__main__":

@@ -1,13 +1,29 @@
-"""Checkpoints written before issue 23's re-layout resume bit for bit.
+"""Checkpoints written before issue 23's re-layout still resume.
 
 ``old_checkpoints/`` holds the checkpoints that the code before the re-layout (commit 4a8694b)
 wrote after frame 2 of the two scenes below (the run stopped by an observer at frame 3). The
 loops' state arrays kept their names, so the new code writes the same arrays at that frame, and a
-run resumed from the old checkpoint ends with the same result as one never stopped.
+run resumed from the old checkpoint ends with the result of one never stopped.
 
-The scene text stored in a checkpoint is compared without what only draws the run (``[look]``
-and the render-time ``tentacles.interpolation``): issue 25 gave the moon-jelly presets a new look,
-which changes no state. The old state is resumed under today's scene text.
+Bit for bit, but for two things the checkpoints' code did differently:
+
+- The tentacles' state. Issue 25's faster banded solve of the tentacle step (docs/decisions.md)
+  sums in another order than the code that wrote these checkpoints, so the tentacle positions
+  and velocities differ from theirs in the last bits (relative to the largest value, under 1e-12
+  in these runs). For those arrays, in the checkpoint and in every frame of the resumed result,
+  the test asks for agreement within ``ROUND_OFF`` of the array's largest value, and of their
+  constraint error (a round-off figure itself) that it stays within the projection's tolerance.
+- The checkpoint's ``scene`` text, which records every key of the scene: issue 25 changed
+  moon-jelly's look (colours, transparency, gonads), and a run refuses to resume from a
+  checkpoint whose text differs from its scene's. So the text is compared without what only
+  draws the run (``[look]`` and the render-time ``tentacles.interpolation``), and the run
+  resumes from the old checkpoint's state (its frame and arrays, as stored) under the present
+  scene text. Issue 25 also gave the moon-jelly presets oral arms: this test runs moon-jelly as
+  it was, its tentacles as one table (``scenes.one_table``).
+
+Everything else (the layout, the frame, the bell's and the fluid's state, the other datasets)
+must still be identical. A checkpoint written by the present code resumes bit for bit
+(tests/integration/test_resume.py).
 """
 
 from __future__ import annotations
@@ -22,6 +38,8 @@ import scenes
 from scenes import one_table
 
 import jellysim
+from jellysim.io.checkpoint import save_checkpoint
+from jellysim.tentacle.kernels import PROJECTION_TOLERANCE
 from regression.compare import differences, read_all
 
 OLD = Path(__file__).resolve().parent / "old_checkpoints"
@@ -57,6 +75,52 @@ def physics(scene_text: str) -> dict[str, object]:
     return tables
 
 
+# What the solve's new summation order changes in positions and velocities, relative to the
+# array's largest value (the reference runs of 0.1 s: up to 2e-10, in velocities).
+ROUND_OFF = 1e-9
+
+
+def _kind(key: str) -> str:
+    """``state`` for the tentacles' positions and velocities (checkpoint arrays and result
+    datasets), ``error`` for their constraint error, ``other`` for the rest."""
+    name = key.rsplit("/", 1)[-1].removeprefix("tentacles_")
+    tentacles = key.startswith("data:tentacles/") or ":" not in key
+    if tentacles and name in ("position", "positions", "velocity", "velocities"):
+        return "state"
+    if key == "data:tentacles/constraint_error":
+        return "error"
+    if key == "scene":
+        return "scene"
+    return "other"
+
+
+def _assert_same_but_round_off(
+    expected: dict[str, np.ndarray], actual: dict[str, np.ndarray]
+) -> None:
+    """Bit for bit, except the tentacles' state (within ``ROUND_OFF``), their constraint error
+    (a round-off figure itself: within the projection's tolerance in both) and the scene text
+    (not compared)."""
+    kinds = {key: _kind(key) for key in expected}
+    assert "state" in kinds.values()
+    others = [k for k, kind in kinds.items() if kind == "other"]
+    assert (
+        differences({k: expected[k] for k in others}, {k: actual[k] for k in others if k in actual})
+        == []
+    )
+    assert expected.keys() == actual.keys()
+    for key, kind in kinds.items():
+        if kind == "scene":
+            continue
+        a, b = expected[key], actual[key]
+        assert (a.dtype, a.shape) == (b.dtype, b.shape), key
+        if kind == "state":
+            np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=key)
+            atol = ROUND_OFF * np.nanmax(np.abs(a))
+            np.testing.assert_allclose(b, a, rtol=0.0, atol=atol, err_msg=key)
+        elif kind == "error":
+            assert np.all(a <= PROJECTION_TOLERANCE) and np.all(b <= PROJECTION_TOLERANCE), key
+
+
 class _Stop(Exception):
     pass
 
@@ -67,7 +131,7 @@ def _stop_at_frame_3(simulation: jellysim.Simulation) -> None:
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_an_old_checkpoint_resumes_bit_for_bit(name: str, tmp_path: Path) -> None:
+def test_an_old_checkpoint_resumes(name: str, tmp_path: Path) -> None:
     preset, overrides = CASES[name]
     scene = jellysim.load_scene(preset, overrides)
     jellysim.run(scene, tmp_path / "whole").close()
@@ -78,12 +142,14 @@ def test_an_old_checkpoint_resumes_bit_for_bit(name: str, tmp_path: Path) -> Non
     checkpoint = stopped / "checkpoint.npz"
     with np.load(checkpoint) as new, np.load(OLD / f"{name}.npz") as old:
         assert sorted(new.files) == sorted(old.files)  # the same layout
-        written = {key: new[key] for key in new.files if key != "scene"}
-        stored = {key: old[key] for key in old.files if key != "scene"}
-        assert physics(str(old["scene"])) == physics(str(new["scene"]))  # the same physics
-        today = new["scene"].copy()
-    assert differences(stored, written) == []  # and the same state, bit for bit
-    np.savez(checkpoint, **stored, scene=today)  # resume from the old state
+        written = {key: new[key] for key in new.files}
+        stored = {key: old[key] for key in old.files}
+    assert physics(str(stored["scene"])) == physics(str(written["scene"]))  # the same physics
+    _assert_same_but_round_off(stored, written)  # and the same state, but round-off
+    # Resume from the old state: its frame and arrays, under the present scene text.
+    with np.load(OLD / f"{name}.npz") as old:
+        state = {key: old[key] for key in old.files if key not in ("frame", "scene")}
+        save_checkpoint(stopped, int(old["frame"]), str(written["scene"]), state)
     jellysim.run(scene, stopped, resume=True).close()
     whole = read_all(tmp_path / "whole" / "result.h5")
-    assert differences(whole, read_all(stopped / "result.h5")) == []
+    _assert_same_but_round_off(whole, read_all(stopped / "result.h5"))

@@ -8,6 +8,7 @@ from hanging import hang
 
 from jellysim.tentacle.kernels import (
     KKT_HALF_BANDWIDTH,
+    KKT_PADDING,
     Medium,
     _band_ldlt_solve,
     bending_energy,
@@ -151,10 +152,11 @@ def test_lumped_masses():
     assert free.mass.sum() == pytest.approx(9 * segment, rel=1e-14)
 
 
-@pytest.mark.parametrize(("n", "b"), [(24, 10), (48, KKT_HALF_BANDWIDTH)])
-def test_banded_ldlt_solve_equals_dense_solve_on_a_saddle_point_system(n, b):
-    # SPD block over 3 unknowns per particle, one multiplier after each particle (as assembled);
-    # the assembled half-bandwidth takes the unrolled path for its interior columns.
+@pytest.mark.parametrize("n", [24, 48])
+def test_banded_ldlt_solve_equals_dense_solve_on_a_saddle_point_system(n):
+    # SPD block over 3 unknowns per particle, one multiplier after each particle (as assembled),
+    # stored between KKT_PADDING zero rows before and after.
+    b = KKT_HALF_BANDWIDTH
     rng = np.random.default_rng(1)
     a = np.zeros((n, n))
     for i in range(n):
@@ -164,15 +166,19 @@ def test_banded_ldlt_solve_equals_dense_solve_on_a_saddle_point_system(n, b):
             elif i % 4 == 3 and j != i and j > i - 8:
                 a[i, j] = rng.uniform(-1, 1)
     a = np.tril(a) + np.tril(a, -1).T
-    band = np.zeros((n, b + 1))
+    band = np.zeros((n + 2 * KKT_PADDING, b + 1))
     for i in range(n):
         for s in range(b + 1):
             if i - s >= 0:
-                band[i, s] = a[i, i - s]
+                band[KKT_PADDING + i, s] = a[i, i - s]
     rhs = rng.normal(size=n)
-    x = rhs.copy()
-    _band_ldlt_solve(band, np.empty(n), x)
-    np.testing.assert_allclose(x, np.linalg.solve(a, rhs), rtol=1e-10, atol=1e-12)
+    x = np.zeros(n + 2 * KKT_PADDING)
+    x[KKT_PADDING : KKT_PADDING + n] = rhs
+    _band_ldlt_solve(band, np.empty(n + 2 * KKT_PADDING), x)
+    np.testing.assert_allclose(
+        x[KKT_PADDING : KKT_PADDING + n], np.linalg.solve(a, rhs), rtol=1e-10, atol=1e-12
+    )
+    assert not np.any(x[:KKT_PADDING]) and not np.any(x[KKT_PADDING + n :])
 
 
 def test_projection_restores_lengths_and_keeps_the_root():

@@ -349,58 +349,71 @@ def rest_shape_positions(
 
 KKT_BLOCK = 4  # unknowns per particle in the saddle-point system: x, y, z and one multiplier
 KKT_HALF_BANDWIDTH = 8  # x_i couples to the same component of x_{i+2}: 2 blocks
+KKT_PADDING = KKT_HALF_BANDWIDTH  # zero rows before and after a system in its band storage
 
 
-# fastmath limited to reassociation and contraction (vectorised sums): no-NaN/no-inf
-# assumptions would hide the divergence the watchdog must see.
-@njit(cache=True, fastmath={"reassoc", "contract"}, error_model="numpy")
-def _band_ldlt_solve(band: np.ndarray, pivots: np.ndarray, rhs: np.ndarray) -> None:
-    """Solve a symmetric banded system in place by LDL^T without pivoting.
+# fastmath limited to contraction (fused multiply-adds): no reassociation, so the order of every
+# sum is the one written here, and no no-NaN/no-inf assumptions, which would hide the divergence
+# the watchdog must see.
+@njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _band_ldlt_solve(band: np.ndarray, inverse_pivots: np.ndarray, rhs: np.ndarray) -> None:
+    """Solve a symmetric system of half-bandwidth b = ``KKT_HALF_BANDWIDTH`` in place by LDL^T
+    without pivoting.
 
-    ``band[r, s] = A[r, r - s]`` (s = 0..b, the lower band) is overwritten by L; ``pivots`` (N,)
-    receives D; ``rhs`` (N,) is overwritten by the solution. The saddle-point systems solved
-    here are ordered so that each multiplier follows the particle it constrains, which keeps the
-    pivots of the particles positive and those of the multipliers negative.
+    Rows b..N-b-1 of ``band`` (N, b + 1) and ``rhs`` (N,) hold the system, ``band[r, s] =
+    A[r, r - s]`` (the lower band); the b rows before and after it are zero padding (the band's
+    and the right-hand side's), so that every column sees a full band and every loop has a fixed
+    trip count. ``band[:, 0]`` is overwritten by D and ``band[:, 1:]`` by L, ``inverse_pivots``
+    (N,) receives 1/D, ``rhs`` the solution (the padding rows of ``rhs`` stay zero). The
+    saddle-point systems solved here are ordered so that each multiplier follows the particle it
+    constrains, which keeps the pivots of the particles positive and those of the multipliers
+    negative.
+
+    Column j: ``w_p = L[j, j-p] D[j-p]``, ``D[j] = A[j, j] - sum_p L[j, j-p] w_p``, ``L[j+m, j] =
+    (A[j+m, j] - sum_p L[j+m, j-p] w_p) / D[j]``. Every sum runs from the farthest row to the
+    nearest, whose term depends on the column just finished: the chain of dependent operations
+    from one column to the next is then one term long, not b.
     """
-    n = band.shape[0]
-    b = band.shape[1] - 1
-    kkt = b == KKT_HALF_BANDWIDTH
-    for j in range(n):
-        if kkt and KKT_HALF_BANDWIDTH <= j < n - KKT_HALF_BANDWIDTH:
-            # Interior column of the assembled systems: every band offset exists and the trip
-            # counts are compile-time constants, so the loops unroll (twice as fast).
-            s = band[j, 0]
-            for p in range(1, KKT_HALF_BANDWIDTH + 1):
-                s -= band[j, p] * band[j, p] * pivots[j - p]
-            pivots[j] = s
-            for m in range(1, KKT_HALF_BANDWIDTH + 1):
-                i = j + m
-                s = band[i, m]
-                for p in range(1, KKT_HALF_BANDWIDTH - m + 1):
-                    s -= band[i, m + p] * band[j, p] * pivots[j - p]
-                band[i, m] = s / pivots[j]
-            continue
-        s = band[j, 0]
-        for k in range(max(0, j - b), j):
-            ljk = band[j, j - k]
-            s -= ljk * ljk * pivots[k]
-        pivots[j] = s
-        for i in range(j + 1, min(n, j + b + 1)):
-            s = band[i, i - j]
-            for k in range(max(0, i - b), j):
-                s -= band[i, i - k] * band[j, j - k] * pivots[k]
-            band[i, i - j] = s / pivots[j]
-    for i in range(n):
+    b = KKT_HALF_BANDWIDTH
+    n_rows = band.shape[0]
+    for j in range(b, n_rows - b):
+        w1 = band[j, 1] * band[j - 1, 0]
+        w2 = band[j, 2] * band[j - 2, 0]
+        w3 = band[j, 3] * band[j - 3, 0]
+        w4 = band[j, 4] * band[j - 4, 0]
+        w5 = band[j, 5] * band[j - 5, 0]
+        w6 = band[j, 6] * band[j - 6, 0]
+        w7 = band[j, 7] * band[j - 7, 0]
+        w8 = band[j, 8] * band[j - 8, 0]
+        pivot = band[j, 0] - band[j, 8] * w8
+        pivot -= band[j, 7] * w7
+        pivot -= band[j, 6] * w6
+        pivot -= band[j, 5] * w5
+        pivot -= band[j, 4] * w4
+        pivot -= band[j, 3] * w3
+        pivot -= band[j, 2] * w2
+        pivot -= band[j, 1] * w1
+        band[j, 0] = pivot
+        inverse = 1.0 / pivot
+        inverse_pivots[j] = inverse
+        w = (w1, w2, w3, w4, w5, w6, w7, w8)
+        for m in range(1, b + 1):
+            i = j + m
+            s = band[i, m]
+            for p in range(b - m, 0, -1):
+                s -= band[i, m + p] * w[p - 1]
+            band[i, m] = s * inverse
+    for i in range(b, n_rows - b):
         s = rhs[i]
-        for k in range(max(0, i - b), i):
-            s -= band[i, i - k] * rhs[k]
+        for p in range(b, 0, -1):
+            s -= band[i, p] * rhs[i - p]
         rhs[i] = s
-    for i in range(n):
-        rhs[i] /= pivots[i]
-    for i in range(n - 1, -1, -1):
+    for i in range(b, n_rows - b):
+        rhs[i] *= inverse_pivots[i]
+    for i in range(n_rows - b - 1, b - 1, -1):
         s = rhs[i]
-        for k in range(i + 1, min(n, i + b + 1)):
-            s -= band[k, k - i] * rhs[k]
+        for p in range(b, 0, -1):
+            s -= band[i + p, p] * rhs[i + p]
         rhs[i] = s
 
 
@@ -525,9 +538,12 @@ def advance_frame(
     for t in prange(n_chains):
         x = positions[t]
         v = velocities[t]
-        band = np.empty((n_unknowns, KKT_HALF_BANDWIDTH + 1))
-        pivots = np.empty(n_unknowns)
-        rhs = np.empty(n_unknowns)
+        # The system in rows KKT_PADDING.. of zero-padded storage (_band_ldlt_solve).
+        padded_band = np.empty((n_unknowns + 2 * KKT_PADDING, KKT_HALF_BANDWIDTH + 1))
+        inverse_pivots = np.empty(n_unknowns + 2 * KKT_PADDING)
+        padded_rhs = np.zeros(n_unknowns + 2 * KKT_PADDING)
+        band = padded_band[KKT_PADDING : KKT_PADDING + n_unknowns]
+        rhs = padded_rhs[KKT_PADDING : KKT_PADDING + n_unknowns]
         old = np.empty((n_particles, 3))
         edges = np.empty((n_segments, 3))
         work = np.empty((4, n_segments))
@@ -560,7 +576,7 @@ def advance_frame(
             # Sequential linearisation: re-solve with the segment directions of the new iterate
             # while a segment rotates so far in one step that its length is off by > 1e-3.
             for _linearisation in range(MAX_LINEARISATIONS):
-                band[:] = 0.0
+                padded_band[:] = 0.0
                 # Assemble the saddle-point system, Eq. (T7); particle i is block q = i - first.
                 for q in range(n_free):
                     i = q + first
@@ -621,7 +637,7 @@ def advance_frame(
                             rhs[k] -= 0.5 * dt2c * along * tdir[k]
                             for kk in range(k + 1):
                                 band[k, k - kk] -= 0.5 * dt2c * tdir[k] * tdir[kk]
-                _band_ldlt_solve(band, pivots, rhs)
+                _band_ldlt_solve(padded_band, inverse_pivots, padded_rhs)
                 if first == 1:
                     for k in range(3):
                         x[0, k] = r[k]
