@@ -1,13 +1,12 @@
-"""Oral arms on the soft bell (issue 25): Case 2's moon jelly with a marginal group and a group of
-four ribbon arms placed at the mouth, the groups docs/rendering.md ("Moon jelly") tells a user
-to write, read from that page. At the test scale of tests/scenes.py (SMALL_MOON, l0 = 0.25 m)
+"""Oral arms on the soft bell (issue 25): Case 2's moon jelly with its marginal group and its group
+of four ribbon arms placed at the mouth, as the moon-jelly presets carry them. At the test scale
+of tests/scenes.py (SMALL_MOON, l0 = 0.25 m)
 for a few frames: it runs, the arms' roots sit on their circle inside the margin, under the
 bell, and the preview draws the arms in their colour (the picture with them against the same
 frame without them)."""
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -23,45 +22,34 @@ from jellysim.render.frame import Frame, Jellyfish
 from jellysim.render.pipeline import frame_cameras, make_members
 from jellysim.render.preview import make_view, project, render_preview
 
-ROOT = Path(__file__).resolve().parents[2]
-SNIPPET_AFTER = "**Short oral arms need a simulated mouth group.**"
 ARM_COLOR = [0.2, 0.25, 0.9]  # a blue no other part of the moon jelly has: easy to find
-
-
-def documented_groups() -> dict[str, Any]:
-    """The ``[tentacles]`` groups docs/rendering.md gives a user for Case 2's oral arms: the
-    first ``text`` block after its "Short oral arms" paragraph, as TOML."""
-    text = (ROOT / "docs" / "rendering.md").read_text(encoding="utf-8")
-    after = text[text.index(SNIPPET_AFTER) :]
-    block = after[after.index("```text\n") + len("```text\n") :]
-    tentacles: dict[str, Any] = tomllib.loads(block[: block.index("```")])["tentacles"]
-    return tentacles
+CASE_2 = ("moon-jelly", "moon-jelly-weightless", "moon-jelly-real-size")
 
 
 def grouped_moon_tree() -> dict[str, Any]:
-    """The moon-jelly preset with its ``[tentacles]`` table replaced by the documented groups,
-    shrunk for a test: four marginal tentacles, the arms 0.84 m long (8 particles 0.12 m apart,
-    so that they stay above the small tank's floor) and in ``ARM_COLOR``."""
+    """The moon-jelly preset shrunk for a test: four marginal tentacles, the arms 0.84 m long
+    (8 particles 0.12 m apart, so that they stay above the small tank's floor) and in
+    ``ARM_COLOR``."""
     tree = scene_source_tree("moon-jelly")
-    tentacles = documented_groups()
-    tentacles["marginal"]["count"] = 4
+    tentacles = tree["tentacles"]
+    tentacles["count"] = 4
     tentacles["oral_arms"].update(particles=8, spacing=0.12, color=ARM_COLOR)
-    tree["tentacles"] = tentacles
     return tree
 
 
-def test_the_documented_groups_are_the_preset_s_tentacles_and_four_ribbon_arms() -> None:
-    tentacles = documented_groups()
-    preset = scene_source_tree("moon-jelly")["tentacles"]
-    for key in ("youngs_modulus", "bending", "root"):
-        assert tentacles[key] == preset[key]
-    for key in ("count", "particles", "spacing", "interpolation"):
-        assert tentacles["marginal"][key] == preset[key]
-    arms = tentacles["oral_arms"]
-    assert (arms["count"], arms["placement"], arms["form"]) == (4, "mouth", "ribbon")
-    bell_radius = scene_source_tree("moon-jelly")["bell"]["radius"]
-    length = (arms["particles"] - 1) * arms["spacing"]
-    assert 0.9 * bell_radius <= length <= 1.1 * bell_radius  # as long as the radius
+@pytest.mark.parametrize("preset", CASE_2)
+def test_the_case_2_presets_carry_the_paper_s_tentacles_and_four_ribbon_arms(preset: str) -> None:
+    scene = jellysim.load_scene(preset)
+    assert [g.name for g in scene.groups] == ["marginal", "oral_arms"]
+    marginal, arms = (g.tentacles for g in scene.groups)
+    assert (marginal.count, marginal.particles) == (10, 20)  # the paper's Case 2
+    assert marginal.placement in (None, "margin")
+    assert (arms.count, arms.placement, arms.form) == (4, "mouth", "ribbon")
+    length = (arms.particles - 1) * arms.spacing
+    assert 0.9 * scene.bell.radius <= length <= 1.1 * scene.bell.radius  # as long as the radius
+    # --set tentacles.count still sets the fringe (the arms keep their four).
+    fewer = jellysim.load_scene(preset, {"tentacles.count": 2})
+    assert [g.tentacles.count for g in fewer.groups] == [2, 4]
 
 
 @pytest.fixture(scope="module")

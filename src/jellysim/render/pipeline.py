@@ -316,6 +316,7 @@ def scene_look(scene: Any, overrides: Sequence[str] = ()) -> Look:
 
 SCHOOL_HUE = 0.04  # a school member's hue turns at most this much of the colour wheel (±14°) ...
 SCHOOL_LIGHTNESS = 0.15  # ... and its lightness by at most this fraction: one species, many shades
+SCHOOL_FOLLOW = 0.25  # a school is followed once it travels this much of one jellyfish's size
 SCHOOL_DROP = 0.45  # each row of a school hangs this much of the spacing lower than the one before
 
 
@@ -464,15 +465,18 @@ def frame_cameras(
     ``fixed`` frames the union of every frame's bounding box; ``follow`` moves with the
     least-squares straight line through the jellyfish's centres (so the pulses of a swimmer's
     speed stay visible) and frames the largest box about it; ``auto`` follows when the centres
-    travel further than the jellyfish's size.
+    travel further than the jellyfish's size, or, for several jellyfish (a school, which fills
+    the picture), further than a quarter of the largest one's: so that the school stays in the
+    middle of the picture rather than drifting across a fixed one.
     """
     boxes = np.stack([m.boxes()[:frames] for m in members])  # (J, F, 2, 3)
     low, high = boxes[:, :, 0].min(axis=0), boxes[:, :, 1].max(axis=0)  # (F, 3)
     centres = np.mean([m.centres()[:frames] for m in members], axis=0)  # (F, 3)
-    size_m = float((high - low).max())
+    one = float((boxes[:, :, 1] - boxes[:, :, 0]).max())  # the largest jellyfish in any frame
     travel = float(np.linalg.norm(centres[-1] - centres[0]))
     if mode == "auto":
-        mode = "follow" if travel > size_m else "fixed"
+        reach = one if len(members) == 1 else SCHOOL_FOLLOW * one
+        mode = "follow" if travel > reach else "fixed"
     if mode == "follow":
         t = np.arange(frames, dtype=np.float64)
         slope, intercept = np.polyfit(t, centres, 1) if frames > 1 else (np.zeros(3), centres[0])
