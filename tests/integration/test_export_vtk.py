@@ -62,12 +62,14 @@ SMALL_MOON = {**scenes.SMALL_MOON, "duration": 0.2, "fps": 10.0, "tentacles.coun
 
 def test_mass_spring_bell_round_trip(tmp_path: Path) -> None:
     """The soft bell's particles and springs, its surface, the fluid without the bell's rows and
-    the drawn tentacles, read back with meshio at every frame."""
+    the drawn tentacles (the preset's two groups: the marginal fringe and the oral arms, one
+    series each), read back with meshio at every frame."""
     moon = jellysim.run("moon-jelly", tmp_path / "moon", overrides=SMALL_MOON)
     out = tmp_path / "vtk"
     paths = export(moon, "vtk", out, interpolation=2)
     assert sorted(p.name for p in paths) == [
-        "bell.pvd", "bell_particles.pvd", "fluid.pvd", "tentacles.pvd",
+        "bell.pvd", "bell_particles.pvd", "fluid.pvd",
+        "tentacles_marginal.pvd", "tentacles_oral_arms.pvd",
     ]  # fmt: skip
     f = moon.file
     pairs = f[fields.BELL_SPRINGS.path][:]
