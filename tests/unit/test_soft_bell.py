@@ -25,7 +25,8 @@ L0 = float(scenes.SMALL_MOON["fluid.spacing"])  # type: ignore[arg-type]
 
 @pytest.fixture(scope="module")
 def scene() -> jellysim.Scene:
-    return jellysim.load_scene("moon-jelly", SMALL)
+    # The paper's ten tentacles alone (its oral arms: tests/integration/test_soft_bell_groups.py)
+    return jellysim.load_scene(scenes.one_table("moon-jelly"), SMALL)
 
 
 @pytest.fixture(scope="module")
