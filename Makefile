@@ -65,16 +65,17 @@ chromium:
 	  fi; }
 
 # Debian's TBB runtime (libtbb12), which Blender, OpenCV and others bring and which Numba would take
-# as its threading layer: the tests run with it installed to show that jellysim avoids it
-# (tests/integration/test_threads.py). Installed here when run as root; otherwise that test skips.
+# as its threading layer: the tests run with it installed to show that jellysim avoids it, and with
+# GNU OpenMP (libgomp1), the layer jellysim takes, to show its threads wait passively
+# (tests/integration/test_threads.py). Installed here when run as root; otherwise those tests skip.
 tbb:
-	@ldconfig -p | grep -q 'libtbb\.so\.12 ' || { \
+	@{ ldconfig -p | grep -q 'libtbb\.so\.12 ' && ldconfig -p | grep -q 'libgomp\.so\.1 '; } || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "installing libtbb12 (the threading-layer test)"; \
+	    echo "installing libtbb12 and libgomp1 (the threading-layer tests)"; \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
-	      apt-get install -y -qq --no-install-recommends libtbb12 >/dev/null; \
+	      apt-get install -y -qq --no-install-recommends libtbb12 libgomp1 >/dev/null; \
 	  else \
-	    echo "note: libtbb12 is not installed; the threading-layer test skips it"; \
+	    echo "note: libtbb12 or libgomp1 is not installed; the threading-layer tests skip them"; \
 	  fi; }
 
 # The main job: simulate the brown-jelly preset, draw its figures and render its movie.

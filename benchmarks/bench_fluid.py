@@ -102,7 +102,7 @@ def main() -> None:
             f"{np.mean(iterations):.0f} "
             f"(mean); per step: {phases}; {solver.searches - searches} cell searches "
             f"(neighbour_skin {scene.fluid.neighbour_skin:g} l0) over "
-            f"t = {started:.4f}-{solver.time:.4f} s"
+            f"t = {started:.4f}-{solver.time:.4f} s; threading layer {numba.threading_layer()}"
         )
         if args.compare_solvers:
             compare_solvers(solver)
