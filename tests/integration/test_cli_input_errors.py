@@ -85,6 +85,21 @@ SET_CASES = {
         ("--set", "tentacles.rest_torsion=-80"),
         ("tentacles.marginal.rest_torsion = -80", "at most 0.5"),
     ),
+    # Issue 26: a current needs a direction; drag laws and coefficients are checked.
+    "zero-current-direction": (
+        ("--set", "flow.model=current", "--set", "flow.direction=[0, 0, 0]"),
+        ("flow.direction", "no direction"),
+    ),
+    "unknown-flow-model": (("--set", "flow.model=currant"), ("flow.model", "'current'")),
+    "unknown-drag-law": (("--set", "tentacles.drag=cylinder"), ("tentacles.drag", "'slender'")),
+    "negative-drag-coefficient": (
+        ("--set", "tentacles.normal_drag=-1"),
+        ("tentacles.normal_drag = -1", ">= 0"),
+    ),
+    "huge-tangential-coefficient": (
+        ("--set", "tentacles.tangential_drag=5"),
+        ("tentacles.tangential_drag = 5", "<= 1"),
+    ),
 }
 
 

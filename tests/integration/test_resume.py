@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scenes
+import tomli_w
 from faultkit import assert_invalid_input as _assert_invalid_input
 from faultkit import assert_same_result as _assert_same_result
 from faultkit import checkpoint_frame as _checkpoint_frame
@@ -217,6 +220,54 @@ def test_api_resume_after_an_aborted_run_is_bitwise_identical(tmp_path: Path) ->
         assert r.frames == scene.frame_count
     jellysim.run(scene, tmp_path / "reference").close()
     _assert_same_result(tmp_path / "aborted", tmp_path / "reference")
+
+
+def _without_keys(text: str, keys: dict[str, tuple[str, ...]]) -> str:
+    """Scene TOML ``text`` without ``keys`` (table -> key names), written as TOML again."""
+    tree = tomllib.loads(text)
+    for table, names in keys.items():
+        for name in names:
+            del tree[table][name]
+    return tomli_w.dumps(tree)
+
+
+def test_a_checkpoint_from_before_new_keys_resumes_and_another_scene_is_refused(
+    tmp_path: Path,
+) -> None:
+    """A checkpoint's scene text written before a key existed (issue 26's flow.model,
+    flow.direction and the drag keys) describes the same scene: its run resumes bit for bit.
+    A text that sets any key differently is another scene and is refused."""
+    overrides = {"duration": 0.5, "tentacles.count": 2, "solver.checkpoint_every": 4}
+    scene = jellysim.load_scene("forced-tentacles", overrides)
+
+    def abort(simulation: jellysim.Simulation) -> None:
+        if simulation.frame == 6:
+            raise _Interrupt
+
+    with pytest.raises(_Interrupt):
+        jellysim.run(scene, tmp_path / "old", observers=[abort])
+    path = tmp_path / "old" / "checkpoint.npz"
+    with np.load(path) as checkpoint:
+        state = {key: checkpoint[key] for key in checkpoint.files}
+    new_keys = {
+        "flow": ("model", "direction"),
+        "tentacles": ("drag", "normal_drag", "tangential_drag"),
+    }
+    older = _without_keys(str(state["scene"]), new_keys)
+    assert "flow" in older and "direction" not in tomllib.loads(older)["flow"]
+    assert older != str(state["scene"])
+    shutil.copytree(tmp_path / "old", tmp_path / "other")
+    np.savez(path, **{**state, "scene": np.array(older)})
+    with jellysim.run(scene, tmp_path / "old", resume=True) as r:
+        assert r.frames == scene.frame_count
+    jellysim.run(scene, tmp_path / "reference").close()
+    _assert_same_result(tmp_path / "old", tmp_path / "reference")
+
+    other = str(state["scene"]).replace('model = "bell"', 'model = "current"')
+    assert other != str(state["scene"])
+    np.savez(tmp_path / "other" / "checkpoint.npz", **{**state, "scene": np.array(other)})
+    with pytest.raises(jellysim.InputError, match="the scene differs"):
+        jellysim.run(scene, tmp_path / "other", resume=True)
 
 
 def test_one_writer_per_folder_and_a_killed_run_leaves_no_lock(tmp_path: Path) -> None:

@@ -38,6 +38,8 @@ import scenes
 from scenes import one_table
 
 import jellysim
+from jellysim.config.load import scene_from_tree
+from jellysim.config.schema import Scene
 from jellysim.io.checkpoint import save_checkpoint
 from jellysim.tentacle.kernels import PROJECTION_TOLERANCE
 from regression.compare import differences, read_all
@@ -64,15 +66,17 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
 DRAWING_ONLY = {"look": None, "tentacles": "interpolation"}  # table -> key (None: the table)
 
 
-def physics(scene_text: str) -> dict[str, object]:
-    """A scene's TOML without the tables and keys that only change the pictures."""
+def physics(scene_text: str) -> Scene:
+    """A scene's TOML without the tables and keys that only change the pictures, as the scene it
+    describes under today's schema (keys added since, e.g. issue 26's ``flow.model``, at their
+    defaults)."""
     tables = tomllib.loads(scene_text)
     for table, key in DRAWING_ONLY.items():
         if key is None:
             tables.pop(table, None)
         elif isinstance(tables.get(table), dict):
             tables[table].pop(key, None)
-    return tables
+    return scene_from_tree(tables)
 
 
 # What the solve's new summation order changes in positions and velocities, relative to the

@@ -299,6 +299,11 @@ def _check_consistency(scene: Scene) -> None:
         )
     if scene.fluid.model == "mps":
         _check_fluid(scene)
+    if scene.flow.model == "current" and not any(scene.flow.direction):
+        raise InputError(
+            "flow.direction = [0, 0, 0] gives the current no direction: give a non-zero vector "
+            "in the world frame, e.g. [1, 0, 0]"
+        )
     bell = scene.bell
     if bell.model == "kinematic" and bell.swim_speed > 0.0 and bell.contraction == 0.0:
         raise InputError(

@@ -49,7 +49,8 @@ class Flow:
         unit="m/s",
         ge=-100.0,
         le=100.0,
-        doc="speed of the water relative to the bell, along the bell axis from root to tip",
+        doc="speed of the water: relative to the bell, along the bell axis from root to tip "
+        "(model = 'bell'), or of the current along direction (model = 'current')",
     )
     noise: float = param(
         0.0,
@@ -64,6 +65,20 @@ class Flow:
         ge=1.0e-3,
         le=1.0e4,
         doc="correlation time of the smooth (Ornstein-Uhlenbeck) flow noise, one per tentacle",
+    )
+    model: str = param(
+        "bell",
+        kind="choice",
+        choices=("bell", "current"),
+        doc="the water at the tentacles: 'bell', the paper's uniform flow relative to the bell "
+        "along its axis (speed); 'current', a uniform current in the world frame, speed along "
+        "direction, whatever the bell does; both with the noise",
+    )
+    direction: tuple[float, float, float] = param(
+        (1.0, 0.0, 0.0),
+        kind="vec3",
+        doc="model = 'current': the current's direction in the world frame (z up; any length "
+        "but zero, normalised)",
     )
 
 
@@ -104,6 +119,28 @@ class Tentacles:
         kind="choice",
         choices=("clamped", "pinned"),
         doc="root held along its initial direction in the bell frame, or a free pin",
+    )
+    drag: str = param(
+        "sphere",
+        kind="choice",
+        choices=("sphere", "slender"),
+        doc="drag law: 'sphere', the paper's sphere per particle (Eq. 3-5), blind to the "
+        "chain's direction; 'slender', normal and tangential drag from the water's velocity "
+        "across and along the chain (independence principle, cylinder coefficients)",
+    )
+    normal_drag: float = param(
+        1.2,
+        ge=0.0,
+        le=10.0,
+        doc="drag = 'slender': normal drag coefficient C_n of a cylinder, on the projected "
+        "area (diameter x length)",
+    )
+    tangential_drag: float = param(
+        0.01,
+        ge=0.0,
+        le=1.0,
+        doc="drag = 'slender': tangential (skin-friction) coefficient C_t, on the wetted "
+        "area (pi x diameter x length)",
     )
     interpolation: int = param(
         1, kind="int", ge=1, le=1000, doc="tentacles drawn per simulated tentacle (render time)"

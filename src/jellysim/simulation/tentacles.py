@@ -26,7 +26,7 @@ from jellysim.fields import Dataset
 from jellysim.io.result import frame_datasets
 from jellysim.simulation.loop import Simulation, register_loop
 from jellysim.tentacle import kernels
-from jellysim.tentacle.flow import flow_noise_for, water_velocity
+from jellysim.tentacle.flow import flow_at_tentacles, flow_noise_for
 from jellysim.tentacle.kernels import advance_frame, rest_shape_positions
 from jellysim.tentacle.layout import RootLayout, root_layout
 from jellysim.tentacle.model import (
@@ -208,8 +208,8 @@ class ChainGroup:
         # The roots follow the margin, C1 in time (paper §4.1, §4.2.4).
         roots, root_velocities, directions = self.driver.roots(times)
         # The surrounding flow relative to the bell, with smooth noise (§4.1.2).
-        flow = water_velocity(
-            self.scene.flow.speed,
+        flow = flow_at_tentacles(
+            self.scene.flow,
             self.driver.axis(times),
             self.driver.bell_velocity(times),
             self.noise.sample(times),

@@ -1,6 +1,8 @@
-"""The water around the tentacles (paper §4.1.2): a uniform flow relative to the bell plus noise.
+"""The water around the tentacles (paper §4.1.2): a uniform flow relative to the bell plus noise,
+or a uniform current in the world frame plus noise (``flow.model``).
 
-In the world frame the water moves at ``v_bell - speed * axis + noise`` (DESIGN §3). The noise is
+In the world frame the water moves at ``v_bell - speed * axis + noise`` (DESIGN §3), or, for a
+current, at ``speed * direction + noise``. The noise is
 smooth and time-correlated, one 3-D process per tentacle: an Ornstein-Uhlenbeck process of
 standard deviation ``noise`` and correlation time tau, drawn on knots every tau / 4 from the
 scene's seed (tentacle k draws from its own spawned stream) and interpolated by C1 Catmull-Rom
@@ -13,7 +15,7 @@ import math
 
 import numpy as np
 
-from jellysim.config.schema import Scene
+from jellysim.config.schema import Flow, Scene
 from jellysim.errors import InputError
 
 KNOTS_PER_CORRELATION_TIME = 4
@@ -79,3 +81,20 @@ def water_velocity(
     """World-frame water velocity at the tentacles, (S, T, 3) m/s, DESIGN §3."""
     uniform = bell_velocity - speed * axis  # (S, 3)
     return uniform[:, None, :] + noise
+
+
+def current_direction(direction: tuple[float, float, float]) -> np.ndarray:
+    """``flow.direction`` as a unit vector (3,) (the scene check refuses a zero one)."""
+    vector = np.asarray(direction, dtype=np.float64)
+    return vector / np.linalg.norm(vector)
+
+
+def flow_at_tentacles(
+    flow: Flow, axis: np.ndarray, bell_velocity: np.ndarray, noise: np.ndarray
+) -> np.ndarray:
+    """The water at the tentacles, (S, T, 3) m/s, by ``flow.model``: 'bell', the paper's
+    uniform flow relative to the bell (:func:`water_velocity`); 'current', ``speed`` along the
+    world-frame ``direction`` whatever the bell does. Both plus the noise (S, T, 3)."""
+    if flow.model == "current":
+        return flow.speed * current_direction(flow.direction) + noise
+    return water_velocity(flow.speed, axis, bell_velocity, noise)

@@ -31,6 +31,8 @@ from numba import njit, prange
 
 REYNOLDS_STOKES = 1.0  # below: Stokes drag 3 pi mu d u (Eq. T4, first branch)
 REYNOLDS_HOLD = 1.0e4  # above: the drag coefficient is held at its value here (Eq. T4)
+DRAG_SPHERE = 0  # tentacles.drag = "sphere": the paper's law, Eq. (T4-T5)
+DRAG_SLENDER = 1  # tentacles.drag = "slender": normal and tangential drag, Eq. (T14)
 
 
 class ChainModel(NamedTuple):
@@ -54,6 +56,9 @@ class ChainModel(NamedTuple):
     clamped: bool
     spacing: float  # d, m
     free_root: bool
+    drag_law: int = 0  # DRAG_SPHERE: the paper's sphere per particle; DRAG_SLENDER: Eq. (T14)
+    normal_drag: float = 0.0  # C_n of the slender law, on the projected area d l
+    tangential_drag: float = 0.0  # C_t of the slender law, on the wetted area pi d l
 
 
 class Medium(NamedTuple):
@@ -91,6 +96,29 @@ def drag_gain(speed: float, diameter: float, density: float, viscosity: float) -
         return 3.0 * math.pi * viscosity * diameter
     area = 0.25 * math.pi * diameter * diameter
     return drag_coefficient(reynolds) * 0.5 * density * speed * area
+
+
+@njit(cache=True)
+def slender_drag_gains(
+    tangent: np.ndarray,
+    relative: np.ndarray,
+    diameter: float,
+    length: float,
+    density: float,
+    normal_drag: float,
+    tangential_drag: float,
+) -> tuple[float, float]:
+    """Gains (kg/s) of the slender law, Eq. (T14), on a piece of chain of ``length`` along the
+    unit ``tangent`` moving at ``relative`` (water minus chain, m/s): the force is
+    ``k_n w_n + k_t w_t`` with w_t = (w . t) t and w_n = w - w_t (the independence principle),
+    ``k_n = (rho/2) C_n d l |w_n|`` and ``k_t = (rho/2) C_t pi d l |w_t|``."""
+    along = relative[0] * tangent[0] + relative[1] * tangent[1] + relative[2] * tangent[2]
+    n0 = relative[0] - along * tangent[0]
+    n1 = relative[1] - along * tangent[1]
+    n2 = relative[2] - along * tangent[2]
+    across = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    half = 0.5 * density * diameter * length
+    return half * normal_drag * across, half * tangential_drag * math.pi * abs(along)
 
 
 @njit(cache=True)
@@ -496,6 +524,111 @@ PROJECTION_TOLERANCE = 1.0e-10  # relative segment-length error after every step
 PROJECTION_MAX_ITERATIONS = 50
 
 
+@njit(cache=True)
+def _assemble_slender_particle(
+    band: np.ndarray,
+    rhs: np.ndarray,
+    row: int,
+    i: int,
+    q: int,
+    old: np.ndarray,
+    v: np.ndarray,
+    u: np.ndarray,
+    model: ChainModel,
+    medium: Medium,
+    dt: float,
+    dt2c: float,
+    n_particles: int,
+    work: np.ndarray,
+) -> None:
+    """Particle i's rows of the saddle-point system (Eq. T7) under the slender law (Eq. T14):
+    the drag ``K (u - v)`` with ``K = k_n I + (k_t - k_n) t t^T`` implicit in v, its gains from
+    the velocity and the tangent t at the start of the step (particle i's share of the chain:
+    the chord from i-1 to i+1, length d; an end, tip or free root, its one segment, d/2, as
+    its mass is half). ``work`` (2, 3)."""
+    tangent = work[0]
+    relative = work[1]
+    lo = i - 1 if i >= 1 else 0
+    hi = i + 1 if i + 1 < n_particles else i
+    norm = 0.0
+    for k in range(3):
+        tangent[k] = old[hi, k] - old[lo, k]
+        norm += tangent[k] * tangent[k]
+        relative[k] = u[k] - v[i, k]
+    norm = math.sqrt(norm)
+    for k in range(3):
+        tangent[k] /= norm
+    share = model.spacing if 0 < i < n_particles - 1 else 0.5 * model.spacing  # an end: half
+    k_n, k_t = slender_drag_gains(
+        tangent,
+        relative,
+        model.spacing,
+        share,
+        medium.density,
+        model.normal_drag,
+        model.tangential_drag,
+    )
+    m = model.mass[i]
+    buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
+    bending_diagonal = dt2c * model.stiffness_diag[q]
+    for k in range(3):
+        # Row k of K = k_n I + (k_t - k_n) t t^T; the band holds the lower triangle.
+        kk_diag = k_n + (k_t - k_n) * tangent[k] * tangent[k]
+        band[row + k, 0] = m + dt * kk_diag + bending_diagonal
+        for kk in range(k):
+            band[row + k, k - kk] = dt * (k_t - k_n) * tangent[k] * tangent[kk]
+        if q >= 1:
+            band[row + k, KKT_BLOCK] = dt2c * model.stiffness_off1[q - 1]
+        if q >= 2:
+            band[row + k, 2 * KKT_BLOCK] = dt2c * model.stiffness_off2[q - 2]
+        k_old = k_n * old[i, k]
+        k_u = k_n * u[k]
+        along_old = 0.0
+        along_u = 0.0
+        for kk in range(3):
+            along_old += tangent[kk] * old[i, kk]
+            along_u += tangent[kk] * u[kk]
+        k_old += (k_t - k_n) * tangent[k] * along_old
+        k_u += (k_t - k_n) * tangent[k] * along_u
+        rhs[row + k] = (
+            m * (old[i, k] + dt * v[i, k])
+            + dt * k_old
+            + dt * dt * (buoyant * medium.gravity[k] + k_u)
+        )
+
+
+@njit(cache=True)
+def _assemble_constraint(
+    band: np.ndarray,
+    rhs: np.ndarray,
+    row: int,
+    i: int,
+    first: int,
+    x: np.ndarray,
+    r: np.ndarray,
+    d: float,
+) -> None:
+    """The multiplier row of segment (i-1, i), linearised at the iterate x: n . (x_i - x_{i-1})
+    = d with n the segment's direction (Eq. T7); a free root's is a decoupled dummy."""
+    lam = row + 3
+    if i == 0:
+        band[lam, 0] = -1.0
+        rhs[lam] = 0.0
+        return
+    e0 = x[i, 0] - x[i - 1, 0]
+    e1 = x[i, 1] - x[i - 1, 1]
+    e2 = x[i, 2] - x[i - 1, 2]
+    inv = 1.0 / math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    normal = (e0 * inv, e1 * inv, e2 * inv)
+    rhs[lam] = d
+    for k in range(3):
+        band[lam, 3 - k] = normal[k]
+        if i - 1 >= first:
+            band[lam, 7 - k] = -normal[k]
+    if i - 1 < first:  # the segment from the prescribed root
+        rhs[lam] += normal[0] * r[0] + normal[1] * r[1] + normal[2] * r[2]
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
 def advance_frame(
     positions: np.ndarray,
@@ -535,6 +668,7 @@ def advance_frame(
     c = model.bending_stiffness
     d = model.spacing
     dt2c = dt * dt * c
+    slender = model.drag_law == DRAG_SLENDER
     for t in prange(n_chains):
         x = positions[t]
         v = velocities[t]
@@ -554,6 +688,7 @@ def advance_frame(
                     curled = True
         rest_force = np.zeros((n_particles, 3))
         curl_work = np.empty((6, n_particles, 3)) if curled else np.empty((6, 0, 3))
+        slender_work = np.empty((2, 3))
         worst_error = 0.0
         most_iterations = 0
         failed_at = -1
@@ -584,6 +719,16 @@ def advance_frame(
                     rel0 = u[0] - v[i, 0]
                     rel1 = u[1] - v[i, 1]
                     rel2 = u[2] - v[i, 2]
+                    if slender:
+                        _assemble_slender_particle(
+                            band, rhs, row, i, q, old, v, u, model, medium, dt, dt2c,
+                            n_particles, slender_work,
+                        )  # fmt: skip
+                        if curled:
+                            for k in range(3):
+                                rhs[row + k] += dt * dt * rest_force[i, k]
+                        _assemble_constraint(band, rhs, row, i, first, x, r, d)
+                        continue
                     k_drag = drag_gain(
                         math.sqrt(rel0 * rel0 + rel1 * rel1 + rel2 * rel2),
                         d,

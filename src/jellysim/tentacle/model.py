@@ -9,7 +9,7 @@ import numpy as np
 
 from jellysim.config.schema import Scene
 from jellysim.errors import InputError
-from jellysim.tentacle.kernels import ChainModel, Medium, drag_gain
+from jellysim.tentacle.kernels import DRAG_SLENDER, DRAG_SPHERE, ChainModel, Medium, drag_gain
 from jellysim.tentacle.roots import Forcing
 
 # Cube of the span L of the paper's three-point bending cell, in units of d^3 (Eq. T2).
@@ -74,11 +74,15 @@ def build_chain_model(
     tentacle_density: float,
     bending: str = "euler-bernoulli",
     root: str = "clamped",
+    drag: str = "sphere",
+    normal_drag: float = 0.0,
+    tangential_drag: float = 0.0,
 ) -> ChainModel:
     """Lumped masses (interior: one segment pi d^3 / 4; tip: half) and the bending bands.
 
     ``root`` is "clamped" or "pinned" (prescribed root), or "free": a detached chain whose root
-    is a free end like the tip (used to test falling and momentum conservation).
+    is a free end like the tip (used to test falling and momentum conservation). ``drag`` is
+    "sphere" (the paper's law) or "slender" with the coefficients C_n, C_t (Eq. T14).
     """
     segment_volume = math.pi * spacing**3 / 4.0
     volume = np.full(particles, segment_volume)
@@ -106,13 +110,24 @@ def build_chain_model(
         clamped=clamped,
         spacing=float(spacing),
         free_root=free_root,
+        drag_law=DRAG_SLENDER if drag == "slender" else DRAG_SPHERE,
+        normal_drag=float(normal_drag),
+        tangential_drag=float(tangential_drag),
     )
 
 
 def chain_model_for(scene: Scene) -> ChainModel:
     t = scene.tentacles
     return build_chain_model(
-        t.particles, t.spacing, t.youngs_modulus, scene.tentacle_density, t.bending, t.root
+        t.particles,
+        t.spacing,
+        t.youngs_modulus,
+        scene.tentacle_density,
+        t.bending,
+        t.root,
+        t.drag,
+        t.normal_drag,
+        t.tangential_drag,
     )
 
 
@@ -251,6 +266,15 @@ def plan_substeps(scene: Scene, forcing: Forcing) -> SubstepPlan:
         scene.water.density,
         scene.water.viscosity,
     )
+    if t.drag == "slender":  # the larger of its gains, all of the speed across the chain
+        gain = (
+            0.5
+            * scene.water.density
+            * d
+            * d
+            * max(t.normal_drag, math.pi * t.tangential_drag)
+            * max(characteristic_speed(scene, forcing), 1e-12)
+        )
     speed = characteristic_speed(scene, forcing)
     volume = area * d
     gravity = math.sqrt(sum(g * g for g in scene.water.gravity))
@@ -261,11 +285,10 @@ def plan_substeps(scene: Scene, forcing: Forcing) -> SubstepPlan:
     )
     tension = (t.particles - 1) * per_particle
     wave_speed = math.sqrt(tension / (scene.tentacle_density * area))
-    limits = {
-        "bending": 0.1 / omega_1,
-        "drag": 0.5 * mass / gain,
-        "frame": frame_dt,
-    }
+    limits = {"bending": 0.1 / omega_1}
+    if gain > 0.0:  # the slender law with both coefficients zero has no drag
+        limits["drag"] = 0.5 * mass / gain
+    limits["frame"] = frame_dt
     if wave_speed > 0.0:
         limits["tension"] = TENSION_COURANT * d / wave_speed
     if forcing.period > 0.0:
