@@ -27,7 +27,7 @@ def hang(
         zeros + DOWN,
         zeros,
         np.zeros_like(x),
-        zeros,
+        zeros[:, :, None],  # still water, one velocity per chain
         model,
         medium,
         dt,

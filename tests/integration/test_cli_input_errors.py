@@ -91,6 +91,10 @@ SET_CASES = {
         ("flow.direction", "no direction"),
     ),
     "unknown-flow-model": (("--set", "flow.model=currant"), ("flow.model", "'current'")),
+    "fluid-flow-without-fluid": (
+        ("--set", "flow.model=fluid"),
+        ("flow.model = 'fluid'", "has none", "fluid.model = 'mps'"),
+    ),
     "unknown-drag-law": (("--set", "tentacles.drag=cylinder"), ("tentacles.drag", "'slender'")),
     "negative-drag-coefficient": (
         ("--set", "tentacles.normal_drag=-1"),

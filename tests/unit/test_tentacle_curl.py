@@ -154,8 +154,9 @@ def test_unloaded_chain_keeps_its_rest_shape(root, tau):
         normals = zeros + OUTWARD
         diagnostics = np.zeros((1, 3))
         advance_frame(
-            x, v, zeros, zeros, zeros + DOWN, normals, rest, zeros, model, medium, dt, diagnostics
-        )
+            x, v, zeros, zeros, zeros + DOWN, normals, rest, zeros[:, :, None], model, medium, dt,
+            diagnostics,
+        )  # fmt: skip
         assert diagnostics[0, 2] == -1
         assert np.abs(x - start).max() < 1e-9
         assert np.abs(v).max() < 1e-9
@@ -180,8 +181,9 @@ def test_a_straight_chain_coils_into_its_rest_shape():
     energy_start = total_energy(x[0], c, True, DOWN, OUTWARD, rest[0])
     normals = zeros + OUTWARD
     advance_frame(
-        x, v, zeros, zeros, zeros + DOWN, normals, rest, zeros, model, medium, 1 / 120, diagnostics
-    )
+        x, v, zeros, zeros, zeros + DOWN, normals, rest, zeros[:, :, None], model, medium, 1 / 120,
+        diagnostics,
+    )  # fmt: skip
     assert diagnostics[0, 2] == -1
     assert total_energy(x[0], c, True, DOWN, OUTWARD, rest[0]) < 1e-9 * energy_start
     assert np.abs(x - target).max() < 1e-6

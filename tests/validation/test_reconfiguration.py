@@ -54,7 +54,7 @@ def scaled_drag(cauchy: float, speed: float = SPEED, duration: float = 12.0, dt:
     v = np.zeros_like(x)
     steps = round(duration / dt)
     zeros = np.zeros((steps, 1, 3))
-    flow = zeros + speed * FLOW
+    flow = (zeros + speed * FLOW)[:, :, None]  # one water velocity for the whole chain
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + DOWN, zeros, np.zeros_like(x), flow, model, medium, dt,

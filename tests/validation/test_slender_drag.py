@@ -52,7 +52,7 @@ def fall(direction, particles=11, duration=4.0, dt=2e-3):
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + np.array([0.0, 0.0, -1.0]), zeros, np.zeros_like(x),
-        zeros, model, medium, dt, diagnostics,
+        zeros[:, :, None], model, medium, dt, diagnostics,
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     return v[0]

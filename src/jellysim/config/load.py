@@ -299,6 +299,12 @@ def _check_consistency(scene: Scene) -> None:
         )
     if scene.fluid.model == "mps":
         _check_fluid(scene)
+    if scene.flow.model == "fluid" and not (soft and scene.fluid.model == "mps"):
+        raise InputError(
+            "flow.model = 'fluid' takes the water's velocity from the simulated fluid, and this "
+            "scene has none: use it with bell.model = 'mass-spring' and fluid.model = 'mps' "
+            "(the moon-jelly presets), or flow.model = 'bell' or 'current'"
+        )
     if scene.flow.model == "current" and not any(scene.flow.direction):
         raise InputError(
             "flow.direction = [0, 0, 0] gives the current no direction: give a non-zero vector "

@@ -69,10 +69,12 @@ class Flow:
     model: str = param(
         "bell",
         kind="choice",
-        choices=("bell", "current"),
+        choices=("bell", "current", "fluid"),
         doc="the water at the tentacles: 'bell', the paper's uniform flow relative to the bell "
         "along its axis (speed); 'current', a uniform current in the world frame, speed along "
-        "direction, whatever the bell does; both with the noise",
+        "direction, whatever the bell does; 'fluid', the simulated water's velocity at each "
+        "particle (a scene with a fluid; speed then only sets the substep's speed scale); all "
+        "with the noise",
     )
     direction: tuple[float, float, float] = param(
         (1.0, 0.0, 0.0),

@@ -13,6 +13,7 @@ One frame (paper Fig. 6, §4.2.2-4.2.4) is three named stages, each in its own m
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,7 @@ import numpy as np
 from jellysim import fields
 from jellysim.config import Scene
 from jellysim.coupling.bell_in_fluid import BellInFluid
+from jellysim.coupling.water_at import solver_water_velocity_at
 from jellysim.fields import Dataset
 from jellysim.simulation.fluid import fluid_datasets, fluid_values, report
 from jellysim.simulation.loop import Simulation, register_loop
@@ -37,6 +39,10 @@ class SoftBellSimulation(Simulation):
         self.tentacles = (
             TentacleSimulation(scene, self.coupling.margin) if scene.tentacle_count > 0 else None
         )
+        if self.tentacles is not None and scene.flow.model == "fluid":
+            # The tentacles feel the water at each particle at the frame's end (Eq. S1).
+            solver = self.coupling.solver
+            self.tentacles.water_sampler = partial(solver_water_velocity_at, solver)
 
     def describe(self) -> str:
         c = self.coupling

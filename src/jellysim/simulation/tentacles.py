@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -194,26 +195,34 @@ class ChainGroup:
             directions,
             self.curl_normals(times, directions),
             self.rest_shape,
-            np.zeros_like(roots),
+            np.zeros_like(roots)[:, :, None],
             self.model,
             self.medium,
             self.plan.dt,
             self.diagnostics.copy(),
         )
 
-    def step_frame(self, frame: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def step_frame(
+        self, frame: int, water: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance the group by one frame from ``frame``; the substep times, and the roots and
-        their velocities (Tg, 3) at the last of them."""
+        their velocities (Tg, 3) at the last of them. ``water`` (Tg, Pg, 3) m/s: the simulated
+        water's velocity at each particle, held over the frame (``flow.model = "fluid"``)."""
         times = self.substep_times(frame)
         # The roots follow the margin, C1 in time (paper §4.1, §4.2.4).
         roots, root_velocities, directions = self.driver.roots(times)
-        # The surrounding flow relative to the bell, with smooth noise (§4.1.2).
-        flow = flow_at_tentacles(
-            self.scene.flow,
-            self.driver.axis(times),
-            self.driver.bell_velocity(times),
-            self.noise.sample(times),
-        )
+        noise = self.noise.sample(times)
+        if water is not None:
+            # The simulated water at each particle, with the noise (docs/theory/soft-bell.md §8).
+            flow = water[None, :, :, :] + noise[:, :, None, :]
+        else:
+            # The surrounding flow relative to the bell, with smooth noise (§4.1.2).
+            flow = flow_at_tentacles(
+                self.scene.flow,
+                self.driver.axis(times),
+                self.driver.bell_velocity(times),
+                noise,
+            )[:, :, None, :]
         # The rest shape's root frame, fixed in the bell frame (docs/theory/tentacle.md §6).
         normals = self.curl_normals(times, directions)
         # Bending (Eq. 1-2) with the rest shape (Eq. T13), drag (Eq. 3-5) and inextensibility,
@@ -292,6 +301,9 @@ class TentacleSimulation(Simulation):
     def __init__(self, scene: Scene, driver: RootDriver | None = None) -> None:
         super().__init__(scene)
         self.bell: BellModel | None = None
+        # The simulated water's velocity at points (N, 3) -> (N, 3) m/s, set by a loop that runs
+        # a fluid (flow.model = "fluid").
+        self.water_sampler: Callable[[np.ndarray], np.ndarray] | None = None
         if driver is None:
             self.bell = make_root_driver(scene)
             driver = self.bell
@@ -393,7 +405,7 @@ class TentacleSimulation(Simulation):
 
     def step_frame(self) -> None:
         """Advance the tentacles by one frame; raise SimulationUnstable if they diverged."""
-        done = [(group, group.step_frame(self.frame)) for group in self.groups]
+        done = [(group, group.step_frame(self.frame, self._water(group))) for group in self.groups]
         self.frame += 1
         if len(done) == 1:
             _, (times, rim, rim_velocity) = done[0]
@@ -407,6 +419,16 @@ class TentacleSimulation(Simulation):
         self.notify()
         for group, (times, _, _) in done:
             group.check(times, self.time)
+
+    def _water(self, group: ChainGroup) -> np.ndarray | None:
+        """The simulated water's velocity (Tg, Pg, 3) at ``group``'s particles where the scene's
+        flow is the fluid's (``water_sampler`` set by the loop that runs the fluid), else None."""
+        if self.scene.flow.model != "fluid":
+            return None
+        if self.water_sampler is None:
+            raise RuntimeError("flow.model = 'fluid' needs the fluid loop's water sampler")
+        points = group.positions.reshape(-1, 3)
+        return self.water_sampler(points).reshape(group.positions.shape)
 
     def frame_values(self) -> dict[str, Any]:
         """The current frame as the result store's datasets."""

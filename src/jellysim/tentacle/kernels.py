@@ -649,9 +649,10 @@ def advance_frame(
     ``positions``, ``velocities``: (T, P, 3) state, m and m/s. Per substep s = 0..S-1, at the end
     time of the substep: ``root_positions``, ``root_velocities`` (S, T, 3) the prescribed roots,
     ``root_directions`` (S, T, 3) unit clamp directions t, ``curl_normals`` (S, T, 3) unit normals
-    n perpendicular to t (the root frame of the rest shape), ``flow`` (S, T, 3) the water velocity
-    (m/s) at the chain. ``rest_second_differences`` (T, P, 3) m: each chain's rest shape, the
-    components r_i of its rest second differences in the transported frames (Eq. T12); a chain
+    n perpendicular to t (the root frame of the rest shape), ``flow`` (S, T, 1, 3) the water
+    velocity (m/s) at the chain, or (S, T, P, 3) at each of its particles.
+    ``rest_second_differences`` (T, P, 3) m: each chain's rest shape, the components r_i of its
+    rest second differences in the transported frames (Eq. T12); a chain
     whose entries are all zero is straight at rest and skips the rest-shape force entirely. The
     rest-shape force (Eq. T13) is explicit, evaluated at the start of each substep.
     ``diagnostics`` (T, 3) receives per chain: the largest relative
@@ -669,6 +670,7 @@ def advance_frame(
     d = model.spacing
     dt2c = dt * dt * c
     slender = model.drag_law == DRAG_SLENDER
+    flow_last = flow.shape[2] - 1  # 0: one water velocity per chain; P - 1: one per particle
     for t in prange(n_chains):
         x = positions[t]
         v = velocities[t]
@@ -693,7 +695,6 @@ def advance_frame(
         most_iterations = 0
         failed_at = -1
         for s in range(n_substeps):
-            u = flow[s, t]
             r = root_positions[s, t]
             tdir = root_directions[s, t]
             old[:] = x
@@ -716,6 +717,7 @@ def advance_frame(
                 for q in range(n_free):
                     i = q + first
                     row = KKT_BLOCK * q
+                    u = flow[s, t, min(i, flow_last)]
                     rel0 = u[0] - v[i, 0]
                     rel1 = u[1] - v[i, 1]
                     rel2 = u[2] - v[i, 2]
