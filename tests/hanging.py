@@ -32,5 +32,6 @@ def hang(
         medium,
         dt,
         diagnostics,
+        np.zeros((1, 0, 3)),  # no drag impulse recorded
     )
     return diagnostics

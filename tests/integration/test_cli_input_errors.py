@@ -95,6 +95,10 @@ SET_CASES = {
         ("--set", "flow.model=fluid"),
         ("flow.model = 'fluid'", "has none", "fluid.model = 'mps'"),
     ),
+    "two-way-without-fluid": (
+        ("--set", "flow.two_way=true"),
+        ("flow.two_way = true", "flow.model = 'fluid'"),
+    ),
     "unknown-drag-law": (("--set", "tentacles.drag=cylinder"), ("tentacles.drag", "'slender'")),
     "negative-drag-coefficient": (
         ("--set", "tentacles.normal_drag=-1"),

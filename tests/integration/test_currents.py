@@ -6,11 +6,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
 import jellysim
 from jellysim.config.load import scene_from_tree
+from jellysim.io.plots import flow_label
 from jellysim.tentacle.flow import flow_at_tentacles
 
 # forced-tentacles: roots on a still ring, clamped downwards, in the paper's flow along the axis.
@@ -47,3 +49,29 @@ def test_the_current_ignores_the_bell_and_the_bell_flow_follows_it() -> None:
     np.testing.assert_allclose(current, np.broadcast_to([0.0, 0.3, 0.4], (times, 2, 3)))
     paper = flow_at_tentacles(scene_from_tree({}).flow, axis, bell_velocity, noise)
     np.testing.assert_allclose(paper, np.broadcast_to([0.0, 0.0, 0.2 - 0.3], (times, 2, 3)))
+
+
+def test_the_result_records_the_water_and_the_drag_law(tmp_path: Path) -> None:
+    overrides = {
+        **SMALL,
+        "duration": 0.1,
+        "flow.model": "current",
+        "tentacles.drag": "slender",
+    }
+    scene = jellysim.load_scene("forced-tentacles", overrides)
+    with jellysim.run(scene, out=tmp_path / "current", force=True) as result:
+        assert result.tentacle_flow == "current"
+        assert result.tentacle_drag == ["slender"]
+    scene = jellysim.load_scene("forced-tentacles", {**SMALL, "duration": 0.1})
+    with jellysim.run(scene, out=tmp_path / "paper", force=True) as result:
+        assert (result.tentacle_flow, result.tentacle_drag) == ("bell", ["sphere"])
+    with h5py.File(tmp_path / "current" / "result.h5", "r+") as f:  # as written before issue 26
+        del f.attrs["tentacle_flow"], f.attrs["tentacle_drag"]
+    with jellysim.open_result(tmp_path / "current") as result:
+        assert (result.tentacle_flow, result.tentacle_drag) == ("bell", ["sphere"])
+
+
+def test_flow_labels_name_the_water() -> None:
+    current = scene_from_tree({"flow": {"model": "current", "speed": 0.5, "direction": [0, 1, 0]}})
+    assert flow_label(current) == "current 0.5 m/s along (0, 1, 0)"
+    assert flow_label(scene_from_tree({})) == "v = 0.3 m/s"

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jellysim.coupling.water_at import THIN, water_velocity_at
+from jellysim.coupling.water_at import THIN, spread_reaction, water_velocity_at
 from jellysim.fluid.mps import lattice_reference
 
 L0, RE = 0.1, 2.1 * 0.1
@@ -63,3 +63,20 @@ def test_a_point_on_a_particle_takes_its_velocity() -> None:
     sampled = water_velocity_at(particles[[40, 77]], particles, velocities, RE, N0)
     # its weight, ~1e9, outweighs its neighbours' (of order 1) by as much
     np.testing.assert_allclose(sampled, velocities[[40, 77]], atol=1e-7)
+
+
+def test_the_reaction_gives_the_water_exactly_what_the_tentacles_took() -> None:
+    """Eq. (S2): the momentum shared among the particles sums to minus the impulses of the
+    points that have water within r_e; a point out of the water gives nothing."""
+    particles = cube(10)
+    rng = np.random.default_rng(7)
+    points = np.vstack([rng.uniform(0.2, 0.7, (25, 3)), [[5.0, 5.0, 5.0]]])  # the last: no water
+    impulses = rng.standard_normal((26, 3)) * 1e-3
+    momentum = spread_reaction(points, impulses, particles, RE)
+    np.testing.assert_allclose(momentum.sum(axis=0), -impulses[:-1].sum(axis=0), atol=1e-17)
+    # Each point's share goes to the particles within r_e of it, most to the nearest.
+    one = spread_reaction(points[:1], impulses[:1], particles, RE)
+    distance = np.linalg.norm(particles - points[0], axis=1)
+    assert np.all(one[distance >= RE] == 0.0)
+    nearest = np.argmin(distance)
+    assert np.all(np.abs(one[nearest]) == np.abs(one).max(axis=0))

@@ -58,7 +58,7 @@ def scaled_drag(cauchy: float, speed: float = SPEED, duration: float = 12.0, dt:
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + DOWN, zeros, np.zeros_like(x), flow, model, medium, dt,
-        diagnostics,
+        diagnostics, np.zeros((1, 0, 3)),
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     chain, velocity = x[0], v[0]

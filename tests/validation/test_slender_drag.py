@@ -52,7 +52,7 @@ def fall(direction, particles=11, duration=4.0, dt=2e-3):
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + np.array([0.0, 0.0, -1.0]), zeros, np.zeros_like(x),
-        zeros[:, :, None], model, medium, dt, diagnostics,
+        zeros[:, :, None], model, medium, dt, diagnostics, np.zeros((1, 0, 3)),
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     return v[0]
@@ -96,3 +96,37 @@ def test_a_tilted_chain_glides_as_the_independence_principle_says():
     np.testing.assert_allclose(v[:, 0], expected[0], rtol=1e-5)
     np.testing.assert_allclose(v[:, 2], expected[1], rtol=1e-5)
     np.testing.assert_allclose(v[:, 1], 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("law", ["sphere", "slender"])
+def test_the_recorded_drag_impulse_is_all_the_water_gave_a_free_chain(law: str) -> None:
+    """Two-way coupling gives the water minus the drag impulse the kernel records (issue 26,
+    Eq. S2). A detached chain's bending and length constraints are internal, so its momentum
+    changes by the buoyant weight and that impulse alone: sum m (v_end - v_start) =
+    steps dt W + sum J, to round-off, in a current across it and while it bends."""
+    particles, dt, steps = 12, 2e-3, 300
+    model = build_chain_model(
+        particles, D, 1e4, RHO_T, root="free", drag=law, normal_drag=C_N, tangential_drag=C_T
+    )
+    medium = Medium(RHO_W, MU, np.array([0.0, 0.0, -G]), RHO_T)
+    rng = np.random.default_rng(5)
+    bend = np.cumsum(np.column_stack([np.cos(np.linspace(0, 2, particles)),
+                                      np.zeros(particles), np.sin(np.linspace(0, 2, particles))]),
+                     axis=0) * D  # fmt: skip
+    x = bend[None].copy()
+    v = rng.standard_normal(x.shape) * 0.01
+    v0 = v.copy()
+    zeros = np.zeros((steps, 1, 3))
+    flow = np.broadcast_to(np.array([0.1, 0.05, 0.0]), (steps, 1, particles, 3)).copy()
+    impulse = np.zeros((1, particles, 3))
+    diagnostics = np.zeros((1, 3))
+    advance_frame(
+        x, v, zeros, zeros, zeros + np.array([0.0, 0.0, -1.0]), zeros, np.zeros_like(x), flow,
+        model, medium, dt, diagnostics, impulse,
+    )  # fmt: skip
+    assert diagnostics[0, 2] == -1
+    weight = (RHO_T - RHO_W) * model.volume * G  # buoyant weight per particle, downwards
+    change = (model.mass[:, None] * (v[0] - v0[0])).sum(axis=0)
+    expected = impulse[0].sum(axis=0) + steps * dt * np.array([0.0, 0.0, -weight.sum()])
+    np.testing.assert_allclose(change, expected, rtol=0, atol=1e-9 * np.abs(change).max())
+    assert np.abs(impulse).max() > 0.1 * np.abs(change).max()  # the drag did real work

@@ -305,6 +305,11 @@ def _check_consistency(scene: Scene) -> None:
             "scene has none: use it with bell.model = 'mass-spring' and fluid.model = 'mps' "
             "(the moon-jelly presets), or flow.model = 'bell' or 'current'"
         )
+    if scene.flow.two_way and scene.flow.model != "fluid":
+        raise InputError(
+            f"flow.two_way = true needs the tentacles in the simulated water: set "
+            f"flow.model = 'fluid' (it is {scene.flow.model!r})"
+        )
     if scene.flow.model == "current" and not any(scene.flow.direction):
         raise InputError(
             "flow.direction = [0, 0, 0] gives the current no direction: give a non-zero vector "

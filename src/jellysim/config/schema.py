@@ -76,6 +76,12 @@ class Flow:
         "particle (a scene with a fluid; speed then only sets the substep's speed scale); all "
         "with the noise",
     )
+    two_way: bool = param(
+        False,
+        kind="bool",
+        doc="model = 'fluid': the tentacles' drag acts back on the water, equal and opposite, "
+        "spread over the water particles around each tentacle particle",
+    )
     direction: tuple[float, float, float] = param(
         (1.0, 0.0, 0.0),
         kind="vec3",

@@ -20,6 +20,7 @@ from jellysim.bell.skin import BellSkin
 from jellysim.bell.soft import BellShape, SoftBell
 from jellysim.config.schema import Scene
 from jellysim.coupling.margin import RecordedMargin
+from jellysim.coupling.water_at import spread_reaction
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
@@ -90,6 +91,11 @@ class BellInFluid:
         self._cell_volume = l0**3
         self._force = np.zeros_like(self.solver.position)
         self._bell_force = np.zeros_like(rest)
+        # The tentacles' drag reaction (Eq. S2) as a force density (N/m3) over the next frame,
+        # when it acts on the water (flow.two_way); None otherwise.
+        self.reaction: np.ndarray | None = (
+            np.zeros_like(self.solver.position) if scene.flow.two_way else None
+        )
 
     @property
     def water_particles(self) -> int:
@@ -114,8 +120,26 @@ class BellInFluid:
         self.body.step_force(
             solver.position[rows], solver.velocity[rows], time, dt, self._bell_force
         )
-        self._force[rows] = self._bell_force / self._cell_volume
+        if self.reaction is None:
+            self._force[rows] = self._bell_force / self._cell_volume
+        else:
+            np.copyto(self._force, self.reaction)
+            self._force[rows] += self._bell_force / self._cell_volume
         return self._force
+
+    def take_reaction(self, points: np.ndarray, impulses: np.ndarray, frame_dt: float) -> None:
+        """The tentacles' drag impulses (N, 3) N s at ``points`` (N, 3) over the frame just
+        taken, given back to the water and the bell as a force density over the next frame
+        (Eq. S2): the momentum ``-sum J`` reaches the water in the explicit stages of the next
+        frame's MPS steps, whose lengths add up to ``frame_dt``."""
+        solver = self.solver
+        fluid = np.flatnonzero(solver.alive & (solver.kind == FLUID))
+        momentum = spread_reaction(
+            points, impulses, solver.position[fluid], solver.constants.re_number_density
+        )
+        assert self.reaction is not None
+        self.reaction[:] = 0.0
+        self.reaction[fluid] = momentum / (frame_dt * self._cell_volume)
 
     def advance(self, end: float, frame_dt: float) -> None:
         """Water and bell together to the time ``end`` (s), in MPS steps of at most the stable

@@ -11,6 +11,15 @@ stage but the springs') and the walls (at rest, so the water slows towards them)
 number density of a particle inside the water. Where the water is thin, at the free surface or
 outside it, n(x) falls below ``THIN`` n0 and the mean is faded to still water in proportion; a
 point with no particle within r_e (out of the water, out of the tank) feels still water.
+
+Two-way (``flow.two_way``): the drag impulse J_i that the water gave tentacle particle i over a
+frame goes back to the water, equal and opposite, shared among the water and bell particles
+within r_e with the same weights, normalised:
+
+    Δp_j = -sum_i J_i w_ij / sum_k w_ik                                               (S2)
+
+so the water receives exactly what the tentacles took (a point with no water particle within r_e
+gives its reaction to nothing).
 """
 
 from __future__ import annotations
@@ -63,3 +72,28 @@ def solver_water_velocity_at(solver: MPSSolver, points: np.ndarray) -> np.ndarra
     return water_velocity_at(
         points, solver.position[use], solver.velocity[use], c.re_number_density, c.n0
     )
+
+
+def spread_reaction(
+    points: np.ndarray, impulses: np.ndarray, positions: np.ndarray, radius: float
+) -> np.ndarray:
+    """The reaction of the drag, Eq. (S2): each point's ``impulses`` (N, 3) N s, taken with the
+    opposite sign, shared among the particles at ``positions`` (M, 3) within ``radius`` in
+    proportion to the weight w(r) = r_e / r - 1 of Eq. (S1). Returns the momentum (M, 3) N s
+    each particle receives; it sums to minus the impulses of the points that have a particle
+    within ``radius`` (a point with none, out of the water, gives its reaction to nothing)."""
+    out = np.zeros((len(positions), 3))
+    if len(points) == 0 or len(positions) == 0:
+        return out
+    near = cKDTree(points).sparse_distance_matrix(
+        cKDTree(positions), radius, output_type="coo_matrix"
+    )
+    rows, cols, distance = near.row, near.col, near.data
+    weight = radius / np.maximum(distance, 1e-9 * radius) - 1.0
+    inside = distance < radius
+    rows, cols, weight = rows[inside], cols[inside], weight[inside]
+    total = np.bincount(rows, weights=weight, minlength=len(points))
+    share = weight / total[rows]
+    for k in range(3):
+        out[:, k] = -np.bincount(cols, weights=share * impulses[rows, k], minlength=len(positions))
+    return out

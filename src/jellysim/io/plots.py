@@ -8,10 +8,28 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from jellysim import fields
+from jellysim.config import Scene
 from jellysim.io.result import Result
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+
+
+def flow_label(scene: Scene) -> str:
+    """What the tentacles' water was, for a title: the paper's flow (``v = 0.3 m/s``), a current
+    (``current 0.3 m/s along (1, 0, 0)``) or the simulated water (``simulated water``, with
+    ``, two-way``)."""
+    f = scene.flow
+    if f.model == "current":
+        direction = ", ".join(f"{c:g}" for c in f.direction)
+        return f"current {f.speed:g} m/s along ({direction})"
+    if f.model == "fluid":
+        return "simulated water" + (", two-way" if f.two_way else "")
+    return f"v = {f.speed:g} m/s"
+
+
+def _drag_label(law: str) -> str:
+    return "" if law == "sphere" else f", {law} drag"
 
 
 def _pyplot():  # type: ignore[no-untyped-def]
@@ -66,7 +84,7 @@ def root_tip_trace(result: Result, path: Path, tentacle: int | None = None) -> P
         named = f"group {names[group[k]]}, " if len(names) > 1 else ""
         ax.set_title(
             f"{scene.name}: {named}tentacle {k}, E = {t.youngs_modulus:g} Pa, "
-            f"v = {scene.flow.speed:g} m/s ({t.bending}, {t.root})",
+            f"{flow_label(scene)} ({t.bending}, {t.root}{_drag_label(t.drag)})",
             fontsize=10,
         )
         ax.grid(alpha=0.3)
@@ -201,13 +219,13 @@ def jetting_and_relaxation(result: Result, path: Path) -> Path:
         t = scene.tentacles
         g = drawn[0]
         title = (
-            f"{scene.name}: E = {t.youngs_modulus:g} Pa, v = {scene.flow.speed:g} m/s, "
+            f"{scene.name}: E = {t.youngs_modulus:g} Pa, {flow_label(scene)}, "
             f"{simulated.shape[1]} simulated x {g.positions.shape[1] // max(1, simulated.shape[1])}"
             " drawn tentacles (cf. paper Fig. 9)"
         )
     else:
         title = (
-            f"{scene.name}: v = {scene.flow.speed:g} m/s; "
+            f"{scene.name}: {flow_label(scene)}; "
             + ", ".join(
                 f"{g.name} {g.positions.shape[1]} drawn of "
                 f"{len(range(simulated.shape[1])[g.simulated])}"

@@ -537,6 +537,23 @@ class Result:
             return [DEFAULT_GROUP]
         return [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(names)]
 
+    @property
+    def tentacle_flow(self) -> str:
+        """The water the tentacles felt (``flow.model``): "bell" (the paper's flow relative to the
+        bell; also results written before issue 26), "current", "fluid" (the simulated water)
+        or "fluid-two-way" (and acting back on it)."""
+        flow = self.file.attrs.get("tentacle_flow", "bell")
+        return flow.decode() if isinstance(flow, bytes) else str(flow)
+
+    @property
+    def tentacle_drag(self) -> list[str]:
+        """Each tentacle group's drag law, "sphere" (the paper's; also results written before
+        issue 26) or "slender", in the order of :attr:`tentacle_groups`."""
+        laws = self.file.attrs.get("tentacle_drag")
+        if laws is None:
+            return ["sphere"] * len(self.tentacle_groups)
+        return [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(laws)]
+
     def group_number(self, group: str | int) -> int:
         """The index of ``group`` (its name, or its index) in :attr:`tentacle_groups`; raises
         :class:`InputError` naming the groups for one the result does not have."""

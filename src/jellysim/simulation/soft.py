@@ -25,7 +25,7 @@ from jellysim.coupling.water_at import solver_water_velocity_at
 from jellysim.fields import Dataset
 from jellysim.simulation.fluid import fluid_datasets, fluid_values, report
 from jellysim.simulation.loop import Simulation, register_loop
-from jellysim.simulation.tentacles import TentacleSimulation
+from jellysim.simulation.tentacles import TentacleSimulation, tentacle_water_attributes
 
 
 @register_loop("soft-bell")
@@ -43,6 +43,11 @@ class SoftBellSimulation(Simulation):
             # The tentacles feel the water at each particle at the frame's end (Eq. S1).
             solver = self.coupling.solver
             self.tentacles.water_sampler = partial(solver_water_velocity_at, solver)
+            if scene.flow.two_way:
+                # Their drag acts back on the water over the next frame (Eq. S2).
+                self.tentacles.water_reaction = partial(
+                    self.coupling.take_reaction, frame_dt=self.frame_dt
+                )
 
     def describe(self) -> str:
         c = self.coupling
@@ -141,7 +146,7 @@ class SoftBellSimulation(Simulation):
         if self.tentacles is not None:
             attributes["tentacle_dt"] = self.tentacles.plan.dt
             attributes["tentacle_substeps"] = self.tentacles.plan.substeps
-            attributes["tentacle_groups"] = list(self.tentacles.layout.names)
+            attributes.update(tentacle_water_attributes(self.scene, self.tentacles.layout.names))
         return attributes
 
     def checkpoint_state(self) -> dict[str, np.ndarray]:
@@ -152,6 +157,8 @@ class SoftBellSimulation(Simulation):
         if self.tentacles is not None:
             for name, value in self.tentacles.checkpoint_state().items():
                 state[f"tentacles_{name}"] = value
+        if self.coupling.reaction is not None:  # the tentacles' reaction still to act
+            state["coupling_reaction"] = self.coupling.reaction.copy()
         return state
 
     def restore(self, frame: int, state: dict[str, np.ndarray]) -> None:
@@ -164,6 +171,8 @@ class SoftBellSimulation(Simulation):
             self.tentacles.restore(
                 frame, {k[10:]: v for k, v in state.items() if k.startswith("tentacles_")}
             )
+        if self.coupling.reaction is not None:
+            self.coupling.reaction[:] = state["coupling_reaction"]
 
     def finish(self) -> None:
         report(self.coupling.solver, self.coupling.stats)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -112,6 +112,9 @@ class ChainGroup:
         self.positions = np.empty((t.count, t.particles, 3))
         self.velocities = np.empty((t.count, t.particles, 3))
         self.diagnostics = np.zeros((t.count, 3))
+        # The water's drag impulse on each particle over the frame (N s), kept only where it
+        # acts back on the water (flow.two_way).
+        self.drag_impulse = np.zeros((t.count, t.particles if scene.flow.two_way else 0, 3))
         self.rest_shape = rest_shape_for(scene)
         self.curled = bool(np.any(self.rest_shape != 0.0))
         self.outward = self._outward() if self.curled else np.zeros((t.count, 3))
@@ -200,6 +203,7 @@ class ChainGroup:
             self.medium,
             self.plan.dt,
             self.diagnostics.copy(),
+            self.drag_impulse.copy(),
         )
 
     def step_frame(
@@ -225,6 +229,7 @@ class ChainGroup:
             )[:, :, None, :]
         # The rest shape's root frame, fixed in the bell frame (docs/theory/tentacle.md §6).
         normals = self.curl_normals(times, directions)
+        self.drag_impulse[:] = 0.0  # summed over this frame's substeps
         # Bending (Eq. 1-2) with the rest shape (Eq. T13), drag (Eq. 3-5) and inextensibility,
         # every substep of every chain.
         advance_frame(
@@ -240,6 +245,7 @@ class ChainGroup:
             self.medium,
             self.plan.dt,
             self.diagnostics,
+            self.drag_impulse,
         )
         return times, roots[-1], root_velocities[-1]
 
@@ -286,6 +292,18 @@ class ChainGroup:
         return f"tentacle {number} (group {self.name!r})"
 
 
+def tentacle_water_attributes(scene: Scene, names: Sequence[str]) -> dict[str, Any]:
+    """The root attributes that say what each tentacle group is and what water it felt:
+    ``tentacle_groups`` (names), ``tentacle_flow`` (``flow.model``, "fluid-two-way" where the
+    tentacles act back on the water) and ``tentacle_drag`` (each group's drag law)."""
+    flow = scene.flow.model + ("-two-way" if scene.flow.two_way else "")
+    return {
+        "tentacle_groups": list(names),
+        "tentacle_flow": flow,
+        "tentacle_drag": [g.tentacles.drag for g in scene.groups],
+    }
+
+
 @register_loop("tentacles")
 class TentacleSimulation(Simulation):
     """One scene's tentacles, group by group, and what drives their roots.
@@ -304,6 +322,9 @@ class TentacleSimulation(Simulation):
         # The simulated water's velocity at points (N, 3) -> (N, 3) m/s, set by a loop that runs
         # a fluid (flow.model = "fluid").
         self.water_sampler: Callable[[np.ndarray], np.ndarray] | None = None
+        # Takes the drag impulses (N, 3) N s at the points (N, 3) where the water was sampled,
+        # once a frame (flow.two_way): the reaction on the water.
+        self.water_reaction: Callable[[np.ndarray, np.ndarray], None] | None = None
         if driver is None:
             self.bell = make_root_driver(scene)
             driver = self.bell
@@ -405,7 +426,16 @@ class TentacleSimulation(Simulation):
 
     def step_frame(self) -> None:
         """Advance the tentacles by one frame; raise SimulationUnstable if they diverged."""
-        done = [(group, group.step_frame(self.frame, self._water(group))) for group in self.groups]
+        sampled = [self._water(group) for group in self.groups]
+        # Where the water was sampled: where its reaction goes (Eq. S2).
+        starts = [g.positions.reshape(-1, 3).copy() for g in self.groups]
+        done = [
+            (group, group.step_frame(self.frame, water))
+            for group, water in zip(self.groups, sampled, strict=True)
+        ]
+        if self.water_reaction is not None:
+            impulses = [g.drag_impulse.reshape(-1, 3) for g in self.groups]
+            self.water_reaction(np.concatenate(starts), np.concatenate(impulses))
         self.frame += 1
         if len(done) == 1:
             _, (times, rim, rim_velocity) = done[0]
@@ -502,5 +532,5 @@ class TentacleSimulation(Simulation):
             "tentacle_dt": self.plan.dt,
             "tentacle_substeps": self.plan.substeps,
             "bell_model": self.scene.bell.model,
-            "tentacle_groups": list(self.layout.names),
+            **tentacle_water_attributes(self.scene, self.layout.names),
         }

@@ -540,12 +540,12 @@ def _assemble_slender_particle(
     dt2c: float,
     n_particles: int,
     work: np.ndarray,
-) -> None:
+) -> tuple[float, float]:
     """Particle i's rows of the saddle-point system (Eq. T7) under the slender law (Eq. T14):
     the drag ``K (u - v)`` with ``K = k_n I + (k_t - k_n) t t^T`` implicit in v, its gains from
     the velocity and the tangent t at the start of the step (particle i's share of the chain:
     the chord from i-1 to i+1, length d; an end, tip or free root, its one segment, d/2, as
-    its mass is half). ``work`` (2, 3)."""
+    its mass is half). ``work`` (2, 3): the tangent is left in row 0. Returns (k_n, k_t)."""
     tangent = work[0]
     relative = work[1]
     lo = i - 1 if i >= 1 else 0
@@ -595,6 +595,41 @@ def _assemble_slender_particle(
             + dt * k_old
             + dt * dt * (buoyant * medium.gravity[k] + k_u)
         )
+    return k_n, k_t
+
+
+@njit(cache=True)
+def _add_drag_impulse(
+    impulse: np.ndarray,
+    gains: np.ndarray,
+    flow: np.ndarray,
+    x: np.ndarray,
+    old: np.ndarray,
+    first: int,
+    slender: bool,
+    dt: float,
+) -> None:
+    """Add one substep's drag impulse ``dt K (u - v)`` (N s) on each free particle of a chain to
+    ``impulse`` (P, 3): K = k I (sphere, ``gains[i, 0]``) or k_n I + (k_t - k_n) t t^T (slender,
+    ``gains[i]`` = k_n, k_t, t); ``flow`` (1, 3) or (P, 3), v = (x - old) / dt the velocity of
+    the solved step (Eq. T7), before the projection."""
+    last = flow.shape[0] - 1
+    for i in range(first, x.shape[0]):
+        u = flow[min(i, last)]
+        w0 = u[0] - (x[i, 0] - old[i, 0]) / dt
+        w1 = u[1] - (x[i, 1] - old[i, 1]) / dt
+        w2 = u[2] - (x[i, 2] - old[i, 2]) / dt
+        k = gains[i, 0]
+        if slender:
+            t0, t1, t2 = gains[i, 2], gains[i, 3], gains[i, 4]
+            along = (gains[i, 1] - k) * (w0 * t0 + w1 * t1 + w2 * t2)
+            impulse[i, 0] += dt * (k * w0 + along * t0)
+            impulse[i, 1] += dt * (k * w1 + along * t1)
+            impulse[i, 2] += dt * (k * w2 + along * t2)
+        else:
+            impulse[i, 0] += dt * k * w0
+            impulse[i, 1] += dt * k * w1
+            impulse[i, 2] += dt * k * w2
 
 
 @njit(cache=True)
@@ -643,6 +678,7 @@ def advance_frame(
     medium: Medium,
     dt: float,
     diagnostics: np.ndarray,
+    drag_impulse: np.ndarray,
 ) -> None:
     """Advance all chains through the S substeps of one frame, in place.
 
@@ -658,6 +694,9 @@ def advance_frame(
     ``diagnostics`` (T, 3) receives per chain: the largest relative
     segment-length error after any substep, the most projection iterations, and the first
     substep whose state was not finite or whose projection failed (-1 if none).
+    ``drag_impulse`` (T, P, 3) N s, or (T, 0, 3) to skip it: the water's drag on each particle
+    summed over the substeps, ``dt k (u - v)`` with the gain of the step and the velocity of its
+    solve (added to what it holds; the reaction that two-way coupling gives the water).
     """
     n_chains = positions.shape[0]
     n_particles = positions.shape[1]
@@ -671,6 +710,7 @@ def advance_frame(
     dt2c = dt * dt * c
     slender = model.drag_law == DRAG_SLENDER
     flow_last = flow.shape[2] - 1  # 0: one water velocity per chain; P - 1: one per particle
+    record = drag_impulse.shape[1] > 0
     for t in prange(n_chains):
         x = positions[t]
         v = velocities[t]
@@ -691,6 +731,8 @@ def advance_frame(
         rest_force = np.zeros((n_particles, 3))
         curl_work = np.empty((6, n_particles, 3)) if curled else np.empty((6, 0, 3))
         slender_work = np.empty((2, 3))
+        # Per particle, the step's drag gains: k (sphere) or k_n, k_t and the tangent (slender).
+        gains = np.zeros((n_particles if record else 0, 5))
         worst_error = 0.0
         most_iterations = 0
         failed_at = -1
@@ -722,10 +764,15 @@ def advance_frame(
                     rel1 = u[1] - v[i, 1]
                     rel2 = u[2] - v[i, 2]
                     if slender:
-                        _assemble_slender_particle(
+                        k_n, k_t = _assemble_slender_particle(
                             band, rhs, row, i, q, old, v, u, model, medium, dt, dt2c,
                             n_particles, slender_work,
                         )  # fmt: skip
+                        if record:
+                            gains[i, 0] = k_n
+                            gains[i, 1] = k_t
+                            for k in range(3):
+                                gains[i, 2 + k] = slender_work[0, k]
                         if curled:
                             for k in range(3):
                                 rhs[row + k] += dt * dt * rest_force[i, k]
@@ -737,6 +784,8 @@ def advance_frame(
                         medium.density,
                         medium.viscosity,
                     )
+                    if record:
+                        gains[i, 0] = k_drag
                     m = model.mass[i]
                     buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
                     diagonal = m + dt * k_drag + dt2c * model.stiffness_diag[q]
@@ -799,6 +848,10 @@ def advance_frame(
                     worst = max(worst, abs(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / d - 1.0))
                 if worst < RELINEARISE_ABOVE:
                     break
+            if record:
+                # The drag of the solved step, whose momentum balance the projection below keeps
+                # (it moves particles by mass-weighted, momentum-free corrections).
+                _add_drag_impulse(drag_impulse[t], gains, flow[s, t], x, old, first, slender, dt)
             # Exact inextensibility, Eq. (T8).
             iterations = project_lengths(
                 x,
