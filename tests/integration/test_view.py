@@ -118,6 +118,7 @@ def test_metadata_describes_the_result(brown: jellysim.Result, brown_view: ViewS
     f = brown.file
     scene = brown.scene
     assert meta["name"] == "brown-jelly"
+    assert meta["flow"] == "v = 0.08 m/s"  # the water the tentacles felt, named as the plots do
     assert meta["fps"] == 20.0 and meta["frames"] == brown.frames == 13 and meta["complete"]
     np.testing.assert_array_equal(meta[fields.TIME.path], brown.time)
     look = scene_look(scene)

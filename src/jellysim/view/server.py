@@ -51,6 +51,7 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.errors import InputError
+from jellysim.io.plots import flow_label
 from jellysim.io.result import Result, open_result
 
 STATIC = Path(__file__).parent / "static"
@@ -237,6 +238,8 @@ class ResultData:
             tentacles_meta["groups"] = self._groups_meta(look)
         self._meta: dict[str, Any] = {
             "name": str(scene.name),
+            # What water the tentacles felt, as the plots' titles name it (issue 26).
+            "flow": flow_label(scene) if self.has_tentacles else "",
             "fps": float(f.attrs.get("fps", scene.fps)),
             "frames": self.frames,
             "complete": bool(f.attrs.get("frames_expected", self.frames) == self.frames),

@@ -501,7 +501,8 @@ async function main() {
     }
     const waiting = frame !== state.frame || dirty;
     if (!state.error) {
-      $("status").textContent = waiting ? "loading…" : `${meta.name}${meta.complete ? "" : " (incomplete run)"}`;
+      const flow = meta.flow ? ` · ${meta.flow}` : "";
+      $("status").textContent = waiting ? "loading…" : `${meta.name}${flow}${meta.complete ? "" : " (incomplete run)"}`;
     }
     // Read ahead: the next chunk (wrapping to the start) of every part shown.
     for (const part of ["bell", "tentacles", "fluid"]) {
