@@ -17,6 +17,7 @@ from jellysim.interpolation import interpolate_result
 from jellysim.io.result import Result, open_result
 from jellysim.simulation import Simulation, run
 from jellysim.species import preset_names
+from jellysim.studies import sweep
 
 __all__ = [
     "InputError",
@@ -32,4 +33,5 @@ __all__ = [
     "preset_names",
     "run",
     "scene_to_toml",
+    "sweep",
 ]

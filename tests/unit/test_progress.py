@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+import jellysim.progress as progress_module
 from jellysim.progress import DELAY_ENV, _delay_from_environment, progress
 
 
@@ -36,3 +37,43 @@ def test_quiet_shows_nothing(
     with progress(3, 0, True, "simulating") as bar:
         bar.update(3)
     assert capsys.readouterr().err == ""
+
+
+def test_a_log_gets_whole_lines_never_carriage_returns(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """stderr that is not a terminal (a batch job's log, CI's): plain lines, the first at
+    once (no delay here), then at most one every LOG_INTERVAL s, and the last at the end."""
+    monkeypatch.setenv(DELAY_ENV, "0")
+    with progress(300, 0, False, "simulating") as bar:
+        for _ in range(300):
+            bar.update(1)
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = err.splitlines()
+    assert lines[0].startswith("simulating: 1/300 frames (0 %)")
+    assert lines[-1].startswith("simulating: 300/300 frames (100 %)")
+    assert len(lines) == 2  # the loop took far less than LOG_INTERVAL
+
+
+def test_a_log_line_every_interval_with_the_time_left(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    clock = iter(float(t) for t in range(0, 1000, 5))  # 5 s a frame
+    monkeypatch.setattr(progress_module.time, "monotonic", lambda: next(clock))
+    monkeypatch.setenv(DELAY_ENV, "0")
+    with progress(10, 4, False, "rendering") as bar:  # resumed: 4 of 10 done
+        for _ in range(6):
+            bar.update(1)
+    lines = capsys.readouterr().err.splitlines()
+    # Every other frame (10 s apart) and the last; the rate counts this run's frames only.
+    assert lines[0] == "rendering: 5/10 frames (50 %), 5 s, about 25 s left"
+    assert lines[-1] == "rendering: 10/10 frames (100 %), 30 s"
+    assert len(lines) == 4
+
+
+def test_a_terminal_gets_the_bar(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(progress_module, "_is_terminal", lambda stream: True)
+    bar = progress(3, 0, False, "simulating")
+    assert type(bar).__name__ == "tqdm"
+    bar.close()

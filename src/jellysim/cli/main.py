@@ -20,7 +20,30 @@ from jellysim.errors import (
 )
 
 
+class _Help(argparse.HelpFormatter):
+    """Help that shows each option's default, unless its text already says it or there is none
+    to show (a flag, an option that is unset by default)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if (
+            "default" in text
+            or default is None
+            or default is False  # a flag (0, a number, is shown)
+            or default is argparse.SUPPRESS
+            or (isinstance(default, list) and not default)
+            or not action.option_strings
+        ):
+            return action.help
+        return f"{text} (default: %(default)s)"
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", _Help)
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+
     def error(self, message: str) -> None:  # type: ignore[override]
         # One line (DESIGN §3: at most three), pointing at the help instead of the usage block.
         self.exit(2, f"jellysim: error: {message} (see '{self.prog} --help')\n")
@@ -56,6 +79,7 @@ def _parser() -> argparse.ArgumentParser:
     plot = sub.add_parser("plot", help="the paper's figures for a result")
     plot.add_argument("dir", help="folder holding result.h5")
     plot.add_argument("--out", help="folder for the figures (default: DIR/plots)")
+    plot.add_argument("--quiet", action="store_true", help="print nothing")
 
     sweep = sub.add_parser(
         "sweep", help="run a scene once per value of a key; root and tip x against time"
@@ -72,6 +96,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     sweep.add_argument("--out", default="out/sweeps", help="folder for the figure and the CSV")
     sweep.add_argument("--title", default="", help="figure title")
+    sweep.add_argument("--quiet", action="store_true", help="print nothing")
 
     render = sub.add_parser("render", help="frames and a video of one or more results")
     render.add_argument("dirs", nargs="+", metavar="DIR", help="folder(s) holding result.h5")
@@ -82,7 +107,9 @@ def _parser() -> argparse.ArgumentParser:
         default="auto",
         help="POV-Ray, or the built-in preview (auto: POV-Ray when installed)",
     )
-    render.add_argument("--quality", choices=("draft", "final"), default="draft")
+    render.add_argument(
+        "--quality", choices=("draft", "final"), default="draft", help="picture quality"
+    )
     render.add_argument("--size", default="640x480", metavar="WxH", help="picture size in pixels")
     render.add_argument(
         "--camera",
@@ -127,7 +154,14 @@ def _parser() -> argparse.ArgumentParser:
         "export", help="files for other tools: vtk (ParaView), usd, gltf, obj, ply"
     )
     export.add_argument("dir", help="folder holding result.h5")
-    export.add_argument("--format", required=True, dest="fmt", help="vtk, usd, gltf, obj or ply")
+    export.add_argument(
+        "--format",
+        required=True,
+        dest="fmt",
+        type=str.lower,
+        metavar="{vtk,usd,gltf,obj,ply}",
+        help="the file format (any case)",
+    )
     export.add_argument("--out", help="output folder (default: DIR/export/FORMAT)")
     export.add_argument("--frames", metavar="A:B", help="frames A to B-1 only")
     export.add_argument("--every", type=int, default=1, metavar="K", help="every K-th frame")
@@ -137,6 +171,7 @@ def _parser() -> argparse.ArgumentParser:
         metavar="N",
         help="drawn tentacles per simulated one (thread groups; oral-arm ribbons keep their own)",
     )
+    export.add_argument("--quiet", action="store_true", help="print nothing")
 
     view = sub.add_parser("view", help="play a result in the web browser (a local web page)")
     view.add_argument("dir", help="folder holding result.h5")
@@ -185,9 +220,15 @@ def _cmd_plot(args: argparse.Namespace) -> int:
             paths = plot_result(result, folder)
         except OSError as err:
             raise InputError(f"cannot write the figures: {err}") from None
-    for path in paths:
-        print(path)
+    _print_paths(paths, args.quiet)
     return 0
+
+
+def _print_paths(paths: Sequence[object], quiet: bool) -> None:
+    """The files a command wrote, one a line on stdout, unless ``--quiet``."""
+    if not quiet:
+        for path in paths:
+            print(path)
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
@@ -208,8 +249,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         ]
     except OSError as err:
         raise InputError(f"--out {folder}: cannot write ({err.strerror})") from None
-    for path in paths:
-        print(path)
+    _print_paths(paths, args.quiet)
     return 0
 
 
@@ -285,8 +325,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     with open_result(args.dir) as result:
         out = Path(args.out) if args.out else None
         paths = export(result, args.fmt, out, frames, args.every, args.interpolation)
-    for path in paths:
-        print(path)
+    _print_paths(paths, args.quiet)
     return 0
 
 
