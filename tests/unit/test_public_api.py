@@ -22,3 +22,20 @@ def test_sweep_is_top_level() -> None:
 
     assert jellysim.sweep is sweep
     assert "sweep" in jellysim.__all__
+
+
+def test_every_public_result_accessor_says_what_it_gives() -> None:
+    """Result's properties and methods carry docstrings (the per-frame arrays with shape, dtype
+    and unit, as ``time``: "(F,) float64, s")."""
+    import inspect
+
+    from jellysim.io.result import Result
+
+    undocumented = []
+    for name, member in inspect.getmembers(Result):
+        if name.startswith("_"):
+            continue
+        target = member.fget if isinstance(member, property) else member
+        if callable(target) and not (target.__doc__ or "").strip():
+            undocumented.append(name)
+    assert undocumented == []

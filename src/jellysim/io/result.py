@@ -426,6 +426,7 @@ class Result:
         self.close()
 
     def close(self) -> None:
+        """Close the file (a ``with`` block does it on leaving)."""
         self.file.close()
 
     def has(self, field: Field) -> bool:
@@ -715,18 +716,24 @@ class Result:
 
     @property
     def expected_frames(self) -> int:
+        """The frames the scene asks for (``round(duration * fps) + 1``); :attr:`frames` holds
+        those written so far."""
         return int(self.file.attrs["frames_expected"])
 
     @property
     def complete(self) -> bool:
+        """Whether every frame the scene asks for is written (a killed run's result is not)."""
         return self.frames == self.expected_frames
 
     @property
     def scene_text(self) -> str:
+        """The resolved scene the run was made from, as TOML text (every key explicit)."""
         return str(self.file.attrs["scene"])
 
     @property
     def scene(self) -> Any:
+        """The :class:`jellysim.Scene` the run was made from (:attr:`scene_text`, read under
+        today's schema: keys added since take their defaults)."""
         from jellysim.config import load_scene
         from jellysim.config.load import parse_toml
 
