@@ -13,7 +13,7 @@ import pytest
 import jellysim
 from jellysim.config.load import scene_from_tree
 from jellysim.io.plots import flow_label
-from jellysim.tentacle.flow import flow_at_tentacles
+from jellysim.tentacle.flow import current_direction, flow_at_tentacles
 
 # forced-tentacles: roots on a still ring, clamped downwards, in the paper's flow along the axis.
 SMALL = {"duration": 1.0, "tentacles.count": 2, "flow.noise": 0.0}
@@ -75,3 +75,8 @@ def test_flow_labels_name_the_water() -> None:
     current = scene_from_tree({"flow": {"model": "current", "speed": 0.5, "direction": [0, 1, 0]}})
     assert flow_label(current) == "current 0.5 m/s along (0, 1, 0)"
     assert flow_label(scene_from_tree({})) == "v = 0.3 m/s"
+
+
+def test_a_direction_of_any_finite_size_is_normalised_without_overflow() -> None:
+    np.testing.assert_allclose(current_direction((1e-200, 0.0, 0.0)), [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(current_direction((1e300, -1e300, 0.0)), [0.5**0.5, -(0.5**0.5), 0])

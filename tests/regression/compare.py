@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 import jellysim
-from jellysim.config.load import scene_from_tree
+from jellysim.config.load import same_scene
 from regression.cases import CASES
 
 REFERENCE_FOLDER = Path(__file__).resolve().parent / "reference"
@@ -49,17 +48,10 @@ def read_all(path: Path) -> dict[str, np.ndarray]:
 SCENE_ATTRIBUTE = "attr:scene"
 
 
-def same_scene(expected: str, actual: str) -> bool:
-    """Two scene texts (TOML, as a result records them) are one scene under today's schema: a
-    key that one text lacks takes its default. A key added to the schema later (issue 26's
-    ``flow.model``, say) is written into every new result's text at its default; that changes
-    the text, not the scene. Any other difference of the texts is a difference of the scenes."""
-    return scene_from_tree(tomllib.loads(expected)) == scene_from_tree(tomllib.loads(actual))
-
-
 def differences(expected: dict[str, np.ndarray], actual: dict[str, np.ndarray]) -> list[str]:
     """What differs, bit for bit (dtype, shape and bytes), one line per array; the scene text
-    (``attr:scene``) is compared as the scene it describes (:func:`same_scene`)."""
+    (``attr:scene``) is compared as the scene it describes
+    (:func:`jellysim.config.load.same_scene`: keys added since at their defaults)."""
     lines = [f"missing: {k}" for k in sorted(expected.keys() - actual.keys())]
     lines += [f"new: {k}" for k in sorted(actual.keys() - expected.keys())]
     for key in sorted(expected.keys() & actual.keys()):

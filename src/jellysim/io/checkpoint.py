@@ -8,14 +8,13 @@ seed and the time (:mod:`jellysim.tentacle.flow`), so it needs no saved generato
 from __future__ import annotations
 
 import os
-import tomllib
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jellysim.config.load import scene_from_tree
+from jellysim.config.load import same_scene
 from jellysim.errors import InputError
 
 CHECKPOINT_FILE = "checkpoint.npz"
@@ -55,19 +54,9 @@ def load_checkpoint(folder: Path, scene_toml: str) -> tuple[int, dict[str, np.nd
             f"cannot resume '{folder}': {path.name} is damaged ({detail}); "
             "run with --force to start again"
         ) from None
-    if saved_scene != scene_toml and not _same_scene(saved_scene, scene_toml):
+    if not same_scene(saved_scene, scene_toml):
         raise scene_mismatch(folder)
     return frame, state
-
-
-def _same_scene(saved: str, present: str) -> bool:
-    """The checkpoint's scene text and the present one describe one scene: a key the saved text
-    lacks (one added to jellysim since it was written) takes its default, which keeps the
-    behaviour of the version that wrote it (docs/decisions.md, "Slender drag and currents")."""
-    try:
-        return scene_from_tree(tomllib.loads(saved)) == scene_from_tree(tomllib.loads(present))
-    except (InputError, tomllib.TOMLDecodeError):
-        return False
 
 
 def scene_mismatch(folder: Path) -> InputError:

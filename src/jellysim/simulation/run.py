@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from jellysim.config import Scene, load_scene, scene_to_toml
+from jellysim.config.load import same_scene
 from jellysim.errors import InputError, OutputError, RunInterrupted
 from jellysim.io.checkpoint import (
     CHECKPOINT_FILE,
@@ -171,10 +172,10 @@ def _run(
     result_path = folder / RESULT_FILE
     if resume:
         with Result(folder) as existing:
-            same_scene = existing.scene_text == scene_toml
+            same = same_scene(existing.scene_text, scene_toml)
             complete = existing.complete
             written = existing.frames
-        if not same_scene:
+        if not same:
             raise scene_mismatch(folder)
         if complete:
             log.info("%s is complete; nothing to resume", result_path)

@@ -86,6 +86,7 @@ def water_velocity(
 def current_direction(direction: tuple[float, float, float]) -> np.ndarray:
     """``flow.direction`` as a unit vector (3,) (the scene check refuses a zero one)."""
     vector = np.asarray(direction, dtype=np.float64)
+    vector = vector / np.max(np.abs(vector))  # first to order one: no under- or overflow
     return vector / np.linalg.norm(vector)
 
 

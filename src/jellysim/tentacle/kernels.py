@@ -556,6 +556,13 @@ def _assemble_slender_particle(
         norm += tangent[k] * tangent[k]
         relative[k] = u[k] - v[i, k]
     norm = math.sqrt(norm)
+    if norm < 1e-12 * model.spacing:  # folded back on itself: the segment before i (or after)
+        lo, hi = (i - 1, i) if i >= 1 else (i, i + 1)
+        norm = 0.0
+        for k in range(3):
+            tangent[k] = old[hi, k] - old[lo, k]
+            norm += tangent[k] * tangent[k]
+        norm = math.sqrt(norm)
     for k in range(3):
         tangent[k] /= norm
     share = model.spacing if 0 < i < n_particles - 1 else 0.5 * model.spacing  # an end: half
