@@ -186,6 +186,11 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("presets", help="list the presets")
     show = sub.add_parser("show", help="print a preset's TOML")
     show.add_argument("name")
+    sub.add_parser(
+        "schema",
+        help="print the JSON Schema of scene files, for editors (jellysim schema > "
+        "scene.schema.json; then '#:schema ./scene.schema.json' atop a scene)",
+    )
     return parser
 
 
@@ -358,6 +363,13 @@ def _cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_schema(args: argparse.Namespace) -> int:
+    from jellysim.config.json_schema import main as print_schema
+
+    print_schema()
+    return 0
+
+
 COMMANDS = {
     "run": _cmd_run,
     "plot": _cmd_plot,
@@ -367,6 +379,7 @@ COMMANDS = {
     "view": _cmd_view,
     "presets": _cmd_presets,
     "show": _cmd_show,
+    "schema": _cmd_schema,
 }
 
 
