@@ -186,6 +186,11 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("presets", help="list the presets")
     show = sub.add_parser("show", help="print a preset's TOML")
     show.add_argument("name")
+    completion = sub.add_parser(
+        "completion",
+        help='print shell completion: eval "$(jellysim completion bash)" in ~/.bashrc',
+    )
+    completion.add_argument("shell", choices=("bash", "zsh"), help="the shell")
     sub.add_parser(
         "schema",
         help="print the JSON Schema of scene files, for editors (jellysim schema > "
@@ -363,6 +368,14 @@ def _cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_completion(args: argparse.Namespace) -> int:
+    from jellysim.cli.completion import script
+    from jellysim.species import preset_names
+
+    sys.stdout.write(script(args.shell, _parser(), list(preset_names())))
+    return 0
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from jellysim.config.json_schema import main as print_schema
 
@@ -380,6 +393,7 @@ COMMANDS = {
     "presets": _cmd_presets,
     "show": _cmd_show,
     "schema": _cmd_schema,
+    "completion": _cmd_completion,
 }
 
 
