@@ -76,8 +76,8 @@ NOT_RUN = {
     "its jellysim steps are run here (the README's run and render of brown-jelly) and in "
     "tests/integration/test_cli_smoke.py (plot of brown-jelly)",
     "make test": "runs the test suite (what CI runs), this test included",
-    "make web": "npm ci downloads three.js from the registry; 'make test' runs it before the "
-    "suite, and the view examples here use what it installed",
+    "make web": "npm ci downloads three.js and the test tools from the registry (development "
+    "only: the package ships three.js); 'make test' runs it before the suite",
     "blender --python out/brown-jelly/export/usd/import_into_blender.py -- "
     "out/brown-jelly/export/usd/brown-jelly.usdc": "needs Blender, which CI does not install; "
     "the script is run against a stand-in bpy in tests/integration/test_export_usd.py, and "

@@ -32,6 +32,7 @@ from jellysim.view import find_web_modules
 from jellysim.view.server import TOKEN_HEADER, WEB_MODULES_ENV, ViewLimits, ViewServer
 
 CHROMIUM = "/usr/bin/chromium"
+REPOSITORY = Path(__file__).resolve().parents[2]
 FLUID_FRAMES = 10
 FLUID_PARTICLES = 120
 THREE_PATHS = (
@@ -312,7 +313,7 @@ def test_bad_input_exits_2_with_one_line(
     assert "three.js not found" in _exit_2(capsys, str(brown.folder))
 
 
-def test_missing_three_js_says_to_run_make_web(
+def test_missing_three_js_says_to_reinstall_or_run_make_web(
     brown: jellysim.Result, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
 ) -> None:
     import jellysim.view.server as server
@@ -325,9 +326,27 @@ def test_missing_three_js_says_to_run_make_web(
     assert find_web_modules() == modules
     monkeypatch.delenv(WEB_MODULES_ENV, raising=False)
     monkeypatch.setattr(server, "__file__", str(tmp_path / "src" / "jellysim" / "view" / "x.py"))
-    with pytest.raises(InputError, match=r"make web.*npm ci"):
+    with pytest.raises(InputError, match=r"reinstall jellysim.*'make web'.*npm ci"):
         find_web_modules()
-    assert "run 'make web'" in _exit_2(capsys, str(brown.folder))
+    assert "reinstall jellysim" in _exit_2(capsys, str(brown.folder))
+
+
+def test_the_package_ships_three_js_as_npm_installs_it() -> None:
+    """A wheel's viewer needs no checkout and no npm: the package carries three.js (issue 27),
+    the same files as ``make web`` installs (web/package.json pins the version)."""
+    import json
+
+    import jellysim.view.server as server
+
+    packaged = Path(server.__file__).parent / "vendor"
+    assert find_web_modules() == packaged  # what the viewer serves, unless told otherwise
+    pinned = json.loads((REPOSITORY / "web" / "package.json").read_text())["dependencies"]["three"]
+    assert json.loads((packaged / "three" / "package.json").read_text())["version"] == pinned
+    assert (packaged / "three" / "LICENSE").is_file()
+    npm = REPOSITORY / "web" / "node_modules"
+    if (npm / "three").is_dir():  # a checkout after make web: the same bytes
+        for part in server.THREE_FILES.values():
+            assert (packaged / part).read_bytes() == (npm / part).read_bytes(), part
 
 
 def test_ctrl_c_stops_the_server_with_exit_0(brown: jellysim.Result) -> None:
@@ -367,10 +386,7 @@ def test_ctrl_c_stops_the_server_with_exit_0(brown: jellysim.Result) -> None:
 
 def _browser_tools() -> tuple[str, Path] | None:
     node = shutil.which("node")
-    try:
-        modules = find_web_modules()
-    except InputError:
-        return None
+    modules = REPOSITORY / "web" / "node_modules"  # playwright-core: make web, for the tests
     if node is None or not (modules / "playwright-core").is_dir() or not Path(CHROMIUM).exists():
         return None
     return node, modules

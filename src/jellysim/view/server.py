@@ -55,6 +55,8 @@ from jellysim.io.plots import flow_label
 from jellysim.io.result import Result, open_result
 
 STATIC = Path(__file__).parent / "static"
+# three.js ships in the package (jellysim/view/vendor: web/node_modules' files, same layout), so
+# a wheel needs no checkout and no npm (issue 27); `make web` is for development (tests) only.
 WEB_MODULES_ENV = "JELLYSIM_WEB_MODULES"
 THREE_FILES = {  # served path -> path under node_modules
     "/vendor/three/three.module.js": "three/build/three.module.js",
@@ -107,23 +109,32 @@ class FrameRequest(NamedTuple):
 
 
 def find_web_modules() -> Path:
-    """The ``node_modules`` folder holding three.js: ``$JELLYSIM_WEB_MODULES``, else
-    ``web/node_modules`` of the repository this package was installed from (editable)."""
+    """The ``node_modules``-like folder holding three.js: ``$JELLYSIM_WEB_MODULES`` when set,
+    else the copy the package ships (``jellysim/view/vendor``), else ``web/node_modules`` of the
+    repository this package runs from."""
     setting = os.environ.get(WEB_MODULES_ENV)
-    folder = (
-        Path(setting) if setting else Path(__file__).resolve().parents[3] / "web" / "node_modules"
-    )
-    if all((folder / part).is_file() for part in THREE_FILES.values()):
-        return folder
     if setting:
+        folder = Path(setting)
+        if _holds_three(folder):
+            return folder
         raise InputError(
             f"{WEB_MODULES_ENV}={setting}: three.js not found there "
             "(expected three/build/three.module.js in that node_modules folder)"
         )
+    packaged = Path(__file__).resolve().parent / "vendor"
+    repository = Path(__file__).resolve().parents[3] / "web" / "node_modules"
+    for folder in (packaged, repository):
+        if _holds_three(folder):
+            return folder
     raise InputError(
-        "three.js is not installed for jellysim view: run 'make web' (or 'cd web && npm ci') "
-        f"in the jellysim repository, or set {WEB_MODULES_ENV} to a node_modules folder"
+        "three.js is missing from this jellysim installation (jellysim/view/vendor): reinstall "
+        "jellysim; in a checkout, 'make web' (or 'cd web && npm ci') installs it, or set "
+        f"{WEB_MODULES_ENV} to a node_modules folder"
     )
+
+
+def _holds_three(folder: Path) -> bool:
+    return all((folder / part).is_file() for part in THREE_FILES.values())
 
 
 def _color(rgb: tuple[float, float, float]) -> list[float]:
