@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-all lint docs clean venv povray web chromium tbb
+.PHONY: demo test test-all lint docs clean venv povray web chromium tbb fish
 
 # A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
 # lives in the python3-venv package: installed here when run as root, otherwise named.
@@ -78,6 +78,18 @@ tbb:
 	    echo "note: libtbb12 or libgomp1 is not installed; the threading-layer tests skip them"; \
 	  fi; }
 
+# The fish shell, for the shell-completion test (bash is always there). Installed here when run
+# as root; otherwise that test skips its fish part.
+fish:
+	@command -v fish >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing fish (the shell-completion test)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	      apt-get install -y -qq --no-install-recommends fish >/dev/null; \
+	  else \
+	    echo "note: fish is not installed; the shell-completion test skips it"; \
+	  fi; }
+
 # The main job: simulate the brown-jelly preset, draw its figures and render its movie.
 demo: $(BIN)/jellysim povray web
 	$(BIN)/jellysim run purple-jelly --out $(OUT)/purple-jelly --force --set duration=6
@@ -93,11 +105,11 @@ demo: $(BIN)/jellysim povray web
 	@echo "Play it: $(BIN)/jellysim view $(OUT)/purple-jelly"
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
-test: $(BIN)/jellysim povray web chromium tbb
+test: $(BIN)/jellysim povray web chromium tbb fish
 	$(BIN)/python -m pytest -q --durations=25
 
 # Every test, slow ones included.
-test-all: $(BIN)/jellysim povray web chromium tbb
+test-all: $(BIN)/jellysim povray web chromium tbb fish
 	$(BIN)/python -m pytest -q --runslow
 
 lint: $(BIN)/jellysim

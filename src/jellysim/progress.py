@@ -11,7 +11,8 @@ import time
 from typing import Any, TextIO
 
 DELAY_ENV = "JELLYSIM_PROGRESS_DELAY"  # seconds before a bar appears, overriding each caller's
-LOG_INTERVAL = 10.0  # seconds between two progress lines in a log
+LOG_STEPS = 10  # in a log, a line each time another tenth of the work is done,
+LOG_INTERVAL = 60.0  # and at least one a minute (seconds) while work goes on
 
 
 class _NoBar:
@@ -58,8 +59,9 @@ def _is_terminal(stream: TextIO) -> bool:
 
 class LogLines:
     """Progress as whole lines, for a log: ``what: done/total frames (p %), elapsed, about
-    remaining left``, the first once ``delay`` s have passed, then at most one every
-    ``LOG_INTERVAL`` s, and the last when the work is done."""
+    remaining left``, the first once ``delay`` s have passed, then one each time another
+    1 / ``LOG_STEPS`` of the work is done or ``LOG_INTERVAL`` s have passed without a line, and the
+    last when the work is done."""
 
     def __init__(self, total: int, done: int, what: str, delay: float, stream: TextIO) -> None:
         self.total, self.done, self.what = total, done, what
@@ -81,7 +83,10 @@ class LogLines:
         now = time.monotonic()
         if now - self._start < self.delay:
             return
-        if now - self._last >= LOG_INTERVAL or self.done >= self.total:
+        step = self.done * LOG_STEPS // self.total if self.total else 0
+        shown = self._shown * LOG_STEPS // self.total if self.total else 0
+        first = self._last == -math.inf
+        if first or step > shown or now - self._last >= LOG_INTERVAL or self.done >= self.total:
             self._write(now)
 
     def _write(self, now: float) -> None:

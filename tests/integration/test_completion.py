@@ -3,6 +3,7 @@ in a real bash, completes commands, options, option values, preset names and fol
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -71,3 +72,43 @@ def test_zsh_gets_the_same_function_through_bashcompinit(script: Path) -> None:
     )
     assert done.stdout.startswith("autoload -U +X bashcompinit && bashcompinit\n")
     assert done.stdout.endswith(script.read_text())
+
+
+FISH = shutil.which("fish")
+
+
+def test_fish_completes_commands_presets_and_values(tmp_path: Path) -> None:
+    if FISH is None:
+        if os.environ.get("CI"):
+            pytest.fail("fish is not installed: make test installs it as root")
+        pytest.skip("fish is not installed (make fish)")
+    done = subprocess.run(
+        [sys.executable, "-m", "jellysim", "completion", "fish"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    script = tmp_path / "jellysim.fish"
+    script.write_text(done.stdout)
+
+    def complete(line: str) -> list[str]:
+        asked = subprocess.run(
+            [FISH, "--no-config", "-c", f"source {script}; complete -C '{line}'"],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return [entry.split("\t")[0] for entry in asked.stdout.splitlines()]
+
+    assert complete("jellysim ru") == ["run"]
+    assert complete("jellysim run moon-jelly-") == ["moon-jelly-real-size", "moon-jelly-weightless"]
+    assert complete("jellysim render d --quality ") == ["draft", "final"]
+    assert complete("jellysim export d --format g") == ["gltf"]
+
+
+def test_no_arguments_prints_the_help() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "jellysim"], capture_output=True, text=True, check=False
+    )
+    assert done.returncode == 0
+    assert done.stdout.startswith("usage: jellysim") and "completion" in done.stdout

@@ -43,7 +43,7 @@ def test_a_log_gets_whole_lines_never_carriage_returns(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """stderr that is not a terminal (a batch job's log, CI's): plain lines, the first at
-    once (no delay here), then at most one every LOG_INTERVAL s, and the last at the end."""
+    once (no delay here), then one each tenth of the work, the last at the end."""
     monkeypatch.setenv(DELAY_ENV, "0")
     with progress(300, 0, False, "simulating") as bar:
         for _ in range(300):
@@ -53,13 +53,15 @@ def test_a_log_gets_whole_lines_never_carriage_returns(
     lines = err.splitlines()
     assert lines[0].startswith("simulating: 1/300 frames (0 %)")
     assert lines[-1].startswith("simulating: 300/300 frames (100 %)")
-    assert len(lines) == 2  # the loop took far less than LOG_INTERVAL
+    assert [line.split(" frames")[0] for line in lines[1:]] == [
+        f"simulating: {n}/300" for n in range(30, 301, 30)
+    ]
 
 
 def test_a_log_line_every_interval_with_the_time_left(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    clock = iter(float(t) for t in range(0, 1000, 5))  # 5 s a frame
+    clock = iter(float(t) for t in range(0, 10000, 25))  # 25 s a frame
 
     class Clock:  # the progress module's own clock, no one else's
         @staticmethod
@@ -68,14 +70,16 @@ def test_a_log_line_every_interval_with_the_time_left(
 
     monkeypatch.setattr(progress_module, "time", Clock)
     monkeypatch.setenv(DELAY_ENV, "0")
-    with progress(10, 4, False, "rendering") as bar:  # resumed: 4 of 10 done
-        for _ in range(6):
+    with progress(100, 40, False, "rendering") as bar:  # resumed: 40 of 100 done
+        for _ in range(60):
             bar.update(1)
     lines = capsys.readouterr().err.splitlines()
-    # Every other frame (10 s apart) and the last; the rate counts this run's frames only.
-    assert lines[0] == "rendering: 5/10 frames (50 %), 5 s, about 25 s left"
-    assert lines[-1] == "rendering: 10/10 frames (100 %), 30 s"
-    assert len(lines) == 4
+    # A line each tenth (50, 60, ... %) and one a minute between (frames 25 s apart); the rate
+    # counts this run's frames only, 1 frame in 25 s.
+    assert lines[0] == "rendering: 41/100 frames (41 %), 25 s, about 1475 s left"
+    assert lines[1] == "rendering: 44/100 frames (44 %), 100 s, about 1400 s left"  # a minute on
+    assert "rendering: 50/100 frames (50 %), 250 s, about 1250 s left" in lines
+    assert lines[-1] == "rendering: 100/100 frames (100 %), 1500 s"
 
 
 def test_a_terminal_gets_the_bar(monkeypatch: pytest.MonkeyPatch) -> None:

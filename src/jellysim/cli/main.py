@@ -188,9 +188,10 @@ def _parser() -> argparse.ArgumentParser:
     show.add_argument("name")
     completion = sub.add_parser(
         "completion",
-        help='print shell completion: eval "$(jellysim completion bash)" in ~/.bashrc',
+        help='print shell completion: eval "$(jellysim completion bash)" in ~/.bashrc (zsh '
+        "likewise; fish: jellysim completion fish > ~/.config/fish/completions/jellysim.fish)",
     )
-    completion.add_argument("shell", choices=("bash", "zsh"), help="the shell")
+    completion.add_argument("shell", choices=("bash", "zsh", "fish"), help="the shell")
     sub.add_parser(
         "schema",
         help="print the JSON Schema of scene files, for editors (jellysim schema > "
@@ -398,7 +399,11 @@ COMMANDS = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    if not (sys.argv[1:] if argv is None else list(argv)):  # no arguments: the help, not an error
+        parser.print_help()
+        return 0
+    args = parser.parse_args(argv)
     try:
         return COMMANDS[args.command](args)
     except RunInterrupted as err:
