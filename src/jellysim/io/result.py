@@ -54,6 +54,32 @@ FREE_SPACE_MARGIN = 4 * 2**20
 RESERVE_MARGIN = 2**20
 
 
+# Dimension names of Result.to_xarray for the axis letters of jellysim.fields.
+DIMENSIONS = {
+    "T": "tentacle",
+    "P": "particle",
+    "R": "margin_point",
+    "B": "bell_particle",
+    "V": "vertex",
+    "M": "triangle",
+    "S": "spring",
+    "N": "fluid_particle",
+    "D": "dimension",
+}
+
+
+def _dimension(field: Field, axis: str | int) -> str:
+    """The xarray dimension of one axis of ``field``: a named length, or for a fixed one the
+    triangle's ``corner``, a spring's ``end``, otherwise ``xyz``."""
+    if isinstance(axis, str):
+        return DIMENSIONS[axis]
+    if "M" in field.axes:
+        return "corner"
+    if "S" in field.axes:
+        return "end"
+    return "xyz"
+
+
 def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[Dataset]:
     """The per-frame datasets of a tentacle simulation: T = ``tentacles`` chains of
     P = ``particles``, R = ``margin_points`` margin points."""
@@ -554,6 +580,46 @@ class Result:
         if laws is None:
             return ["sphere"] * len(self.tentacle_groups)
         return [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(laws)]
+
+    def to_xarray(self, frames: Frames | None = None) -> Any:
+        """The result as an :class:`xarray.Dataset` (needs xarray: ``pip install xarray``): every
+        dataset it holds as a variable named by its path (``tentacles/position`` ->
+        ``tentacles_position``), with named dimensions (``time``, ``tentacle``, ``particle``,
+        ``xyz``, ``margin_point``, ``bell_particle``, ``vertex``, ``triangle``, ``corner``,
+        ``spring``, ``end``, ``fluid_particle``, ``dimension``), ``time`` (s) as a coordinate,
+        ``xyz`` labelled "x", "y", "z", and each variable's ``units`` and meaning as attributes.
+        ``frames``: only those frames of the per-frame arrays (as :meth:`read`; all by
+        default). Everything read is loaded into memory."""
+        try:
+            import xarray
+        except ImportError:
+            raise InputError(
+                "Result.to_xarray needs xarray, which is not installed: pip install xarray"
+            ) from None
+        chosen = slice(None) if frames is None else frames
+        if isinstance(chosen, int):
+            chosen = [chosen]
+        variables = {}
+        for field in fields.FIELDS:
+            if field is fields.TIME or not self.has(field):
+                continue
+            data = self.read(field, chosen) if field.per_frame else self.read(field)
+            names = tuple(_dimension(field, axis) for axis in field.axes)
+            dims = ("time", *names) if field.per_frame else names
+            described = {"units": field.units, "long_name": field.doc}
+            variables[field.path.replace("/", "_")] = xarray.Variable(dims, data, described)
+        time = self.read(fields.TIME, chosen)
+        coords: dict[str, Any] = {
+            "time": ("time", time, {"units": "s", "long_name": fields.TIME.doc})
+        }
+        if any("xyz" in v.dims for v in variables.values()):
+            coords["xyz"] = ("xyz", np.array(["x", "y", "z"]))
+        attrs: dict[str, Any] = {
+            "scene": self.scene_text,
+            "fps": float(self.file.attrs.get("fps", 0.0)),
+            "tentacle_groups": ", ".join(self.tentacle_groups),
+        }
+        return xarray.Dataset(variables, coords=coords, attrs=attrs)
 
     def group_number(self, group: str | int) -> int:
         """The index of ``group`` (its name, or its index) in :attr:`tentacle_groups`; raises
