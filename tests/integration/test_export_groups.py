@@ -16,6 +16,7 @@ from test_export_gltf import Glb, assert_valid
 import jellysim
 from jellysim import fields
 from jellysim.export import export
+from jellysim.export.gltf import TUBE_SIDES, tube_faces
 from jellysim.export.groups import export_groups
 from jellysim.interpolation import interpolate_groups
 from jellysim.render.pipeline import scene_look
@@ -180,19 +181,25 @@ def test_obj_has_a_group_per_tentacle_group_and_no_nan(
     mtl = (tmp_path / "materials.mtl").read_text().splitlines()
     arms = mtl.index("newmtl tentacles_oral_arms")
     assert [float(v) for v in mtl[arms + 1].split()[1:]] == list(ARMS_COLOR)
-    # Every index in range; the threads' polylines of 41 points, the arms' faces with normals.
+    # Every index in range; the threads as tubes of 41 rings, the arms' faces, all with normals.
     vertices = sum(line.startswith("v ") for line in lines)
     normals = sum(line.startswith("vn ") for line in lines)
     start = lines.index("o tentacles_oral_arms")
-    polylines = [line.split()[1:] for line in lines[:start] if line.startswith("l ")]
-    assert {len(p) for p in polylines} == {41}
-    faces = [line.split()[1:] for line in lines[start:] if line.startswith("f ")]
+    threads_start = lines.index("o tentacles_marginal")
     groups = export_groups(purple, scene_look(purple.scene), None)
+    drawn = groups[0].positions.shape[1]
+    thread_faces = [line for line in lines[threads_start:start] if line.startswith("f ")]
+    assert len(thread_faces) == drawn * len(tube_faces(1, 41))
+    assert not any(line.startswith("l ") for line in lines)
+    faces = [line.split()[1:] for line in lines[start:] if line.startswith("f ")]
     assert len(faces) == len(groups[1].ribbon_meshes(frame).faces)
-    for corner in (c for face in faces for c in face):
+    every = [line.split()[1:] for line in lines if line.startswith("f ")][-len(faces) - 1 :]
+    for corner in (c for face in every for c in face):
         v, n = corner.split("//")
         assert 1 <= int(v) <= vertices and 1 <= int(n) <= normals
-    assert normals == len(groups[1].ribbon_meshes(frame).vertices)
+    arms_normals = len(groups[1].ribbon_meshes(frame).vertices)
+    bell = purple.file[fields.BELL_SURFACE_VERTICES.path].shape[1]
+    assert normals == vertices == bell + arms_normals + drawn * (TUBE_SIDES * 41 + 2)
 
 
 def test_ply_points_are_finite(purple: jellysim.Result, tmp_path: Path) -> None:

@@ -13,6 +13,7 @@ import pytest
 import jellysim
 from jellysim import fields
 from jellysim.export import export
+from jellysim.export.gltf import TUBE_SIDES, tube_faces
 from jellysim.interpolation import interpolate_result
 
 
@@ -27,34 +28,47 @@ def brown(tmp_path_factory: pytest.TempPathFactory) -> jellysim.Result:
     return jellysim.run(scene, folder)
 
 
-def _obj_polylines(path: Path) -> tuple[np.ndarray, list[list[int]]]:
-    vertices, lines = [], []
-    for line in path.read_text().splitlines():
-        if line.startswith("v "):
-            vertices.append([float(v) for v in line.split()[1:]])
-        elif line.startswith("l "):
-            lines.append([int(v) - 1 for v in line.split()[1:]])
-    return np.array(vertices), lines
+def _obj_vertices(path: Path) -> np.ndarray:
+    return np.array(
+        [[float(v) for v in line.split()[1:]] for line in path.read_text().splitlines()
+         if line.startswith("v ")]
+    )  # fmt: skip
 
 
-def test_obj_sequence_holds_the_bell_and_every_drawn_tentacle(
+def test_obj_sequence_holds_the_bell_and_every_drawn_tentacle_as_a_tube(
     brown: jellysim.Result, tmp_path: Path
 ) -> None:
-    first = export(brown, "obj", tmp_path, every=2, interpolation=2)
+    first = export(brown, "obj", tmp_path, every=2, interpolation=2, up="z")
     assert first == [tmp_path / "frame_00000.obj"]
     drawn = interpolate_result(brown, 2)
     faces = brown.file[fields.BELL_SURFACE_FACES.path][:]
+    rings = TUBE_SIDES * 60 + 2  # a tube's vertices: 60 rings and the two cap centres
     for frame in range(0, brown.frames, 2):
         path = tmp_path / f"frame_{frame:05d}.obj"
-        mesh = meshio.read(path)  # the triangles
+        mesh = meshio.read(path)  # every triangle: the bell's, then the tubes'
         bell = brown.file[fields.BELL_SURFACE_VERTICES.path][frame]
-        np.testing.assert_array_equal(mesh.cells_dict["triangle"], faces)
+        np.testing.assert_array_equal(mesh.cells_dict["triangle"][: len(faces)], faces)
         np.testing.assert_allclose(mesh.points[: len(bell)], bell, rtol=1e-6, atol=1e-9)
-        vertices, lines = _obj_polylines(path)
-        assert len(lines) == 12 and all(len(line) == 60 for line in lines)
-        tentacles = np.array([vertices[line] for line in lines])
-        np.testing.assert_allclose(tentacles, drawn[frame], rtol=1e-6, atol=1e-8)
+        assert len(mesh.cells_dict["triangle"]) == len(faces) + 12 * len(tube_faces(1, 60))
+        assert "\nl " not in path.read_text()  # no bare lines, which no renderer draws
+        tubes = mesh.points[len(bell) :].reshape(12, rings, 3)
+        centres = tubes[:, : TUBE_SIDES * 60].reshape(12, 60, TUBE_SIDES, 3).mean(axis=2)
+        np.testing.assert_allclose(centres, drawn[frame], rtol=1e-6, atol=1e-7)
     assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_obj_is_y_up_by_default(brown: jellysim.Result, tmp_path: Path) -> None:
+    """OBJ readers take y as up (Blender's importer, trimesh): jellysim's (x, y, z) is written
+    as (x, z, -y), a rotation that keeps the winding; ``up="z"`` keeps jellysim's axes."""
+    export(brown, "obj", tmp_path / "y", frames=(3, 4))
+    export(brown, "obj", tmp_path / "z", frames=(3, 4), up="z")
+    y_up = _obj_vertices(tmp_path / "y" / "frame_00003.obj")
+    z_up = _obj_vertices(tmp_path / "z" / "frame_00003.obj")
+    np.testing.assert_allclose(y_up, np.stack([z_up[:, 0], z_up[:, 2], -z_up[:, 1]], axis=1))
+    assert "(m, y up)" in (tmp_path / "y" / "frame_00003.obj").read_text().splitlines()[0]
+    # The bell hangs over its tentacles along the file's up axis.
+    bell = len(brown.file[fields.BELL_SURFACE_VERTICES.path][3])
+    assert y_up[:bell, 1].mean() > y_up[bell:, 1].mean()
 
 
 def test_ply_of_a_jellyfish_and_of_a_fluid(brown: jellysim.Result, tmp_path: Path) -> None:

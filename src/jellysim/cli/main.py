@@ -171,6 +171,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="N",
         help="drawn tentacles per simulated one (thread groups; oral-arm ribbons keep their own)",
     )
+    export.add_argument(
+        "--up",
+        choices=("y", "z"),
+        default="y",
+        help="obj: the files' up axis (y, as OBJ readers such as Blender and trimesh expect; z, "
+        "jellysim's own)",
+    )
     export.add_argument("--quiet", action="store_true", help="print nothing")
 
     view = sub.add_parser("view", help="play a result in the web browser (a local web page)")
@@ -335,7 +342,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     frames = _parse_frames(args.frames)
     with open_result(args.dir) as result:
         out = Path(args.out) if args.out else None
-        paths = export(result, args.fmt, out, frames, args.every, args.interpolation)
+        paths = export(result, args.fmt, out, frames, args.every, args.interpolation, args.up)
     _print_paths(paths, args.quiet)
     return 0
 

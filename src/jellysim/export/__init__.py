@@ -68,10 +68,14 @@ def export(
     frames: tuple[int, int] | None = None,
     every: int = 1,
     interpolation: int | None = None,
+    up: str = "y",
 ) -> list[Path]:
-    """Export ``result`` as ``fmt`` into ``out`` (default ``DIR/export/<fmt>``)."""
+    """Export ``result`` as ``fmt`` into ``out`` (default ``DIR/export/<fmt>``); ``up``: the up
+    axis of an OBJ sequence ("y", the OBJ convention, or "z", jellysim's own)."""
     if fmt not in EXPORTERS:
         raise InputError(f"--format {fmt}: unknown; expected one of {', '.join(EXPORTERS)}")
+    if fmt == "obj" and up not in ("y", "z"):
+        raise InputError(f"--up {up}: expected y or z")
     if every < 1:
         raise InputError(f"--every {every}: expected at least 1")
     if interpolation is not None and not 1 <= interpolation <= 1000:
@@ -81,4 +85,8 @@ def export(
     if not 0 <= first < stop <= count:
         raise InputError(f"--frames {first}:{stop}: the result has frames 0:{count}")
     folder = output_folder(out if out is not None else result.folder / "export" / fmt)
+    if fmt == "obj":
+        from jellysim.export.meshes import export_obj
+
+        return export_obj(result, folder, range(first, stop, every), interpolation, up)
     return EXPORTERS[fmt](result, folder, range(first, stop, every), interpolation)

@@ -4,9 +4,11 @@
   clockwise seen from outside) and an object per tentacle group (:mod:`jellysim.export.groups`):
   ``tentacles`` in a one-group scene; in a scene of several, ``tentacles_NAME`` holding the
   group ``g NAME`` in the material ``tentacles_NAME`` of ``materials.mtl`` (the group's colour,
-  the bell's too). A thread group's drawn tentacles are polylines (``l`` elements, each of the
-  group's own particle count), a ribbon group's arms triangles with vertex normals (``vn``).
-  Blender, Houdini and most 3-D tools import OBJ sequences.
+  the bell's too). A thread group's drawn tentacles are closed tapered tubes (the glTF export's,
+  ``TUBE_SIDES`` around, triangles with vertex normals: edges would not render), a ribbon
+  group's arms triangles with vertex normals (``vn``). ``up``: "y" (the default, the convention
+  of OBJ readers: Blender's and trimesh's import read y as up) writes jellysim's (x, y, z) as
+  (x, z, -y); "z" writes them as they are.
 - ``ply``: ``frame_NNNNN.ply`` per frame (binary): for a fluid, the live particles as a point
   cloud with ``pressure``, ``velocity`` (vx, vy, vz) and ``kind``; otherwise the bell's triangles
   and every drawn tentacle's particles (each of its group's own count), with ``part`` (0 bell,
@@ -20,11 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from jellysim import fields
+from jellysim.export.gltf import tube_faces, tube_vertices
 from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
 from jellysim.render.materials import Material, bell_material
 
 MATERIALS = "materials.mtl"  # the materials of a scene of several tentacle groups
+
+
+def to_up(vectors: np.ndarray, up: str) -> np.ndarray:
+    """jellysim's z-up (x, y, z) as the file's axes: unchanged for "z", (x, z, -y) for "y" (a
+    rotation by -90 degrees about x, so handedness and winding are kept)."""
+    if up == "z":
+        return vectors
+    return np.stack([vectors[:, 0], vectors[:, 2], -vectors[:, 1]], axis=1)
 
 
 def _groups(result: Result, interpolation: int | None) -> list[ExportGroup]:
@@ -40,6 +51,18 @@ def _bell(result: Result, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float64),
         result.bell_surface_faces.astype(np.int64),
     )
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals (V, 3) at ``vertices``: the area-weighted sum of their triangles' normals
+    (counter-clockwise faces point them outwards); a vertex in no triangle gets +z."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)  # length: twice the area
+    summed = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(summed, faces[:, k], face)
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    return np.where(length > 0.0, summed / np.maximum(length, 1e-300), [0.0, 0.0, 1.0])
 
 
 def write_mtl(path: Path, materials: list[Material]) -> None:
@@ -63,10 +86,12 @@ def write_obj(
     groups: list[ExportGroup],
     frame: int,
     materials: str | None = None,
+    up: str = "y",
 ) -> None:
     """Frame ``frame`` as an OBJ file (1-based indices; written to a temporary name, then
-    renamed). ``materials``: the MTL file the objects' ``usemtl`` names (None: none named)."""
-    lines = [f"# jellysim frame at t = {time:.9g} s (m, z up)"]
+    renamed). ``materials``: the MTL file the objects' ``usemtl`` names (None: none named);
+    ``up``: the file's up axis (:func:`to_up`)."""
+    lines = [f"# jellysim frame at t = {time:.9g} s (m, {up} up)"]
     if materials is not None:
         lines.append(f"mtllib {materials}")
     offset = normal_offset = 1
@@ -75,9 +100,16 @@ def write_obj(
         lines.append("o bell")
         if materials is not None:
             lines.append("usemtl bell")
-        lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in vertices]
-        lines += [f"f {a + offset} {b + offset} {c + offset}" for a, b, c in faces]
+        lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in to_up(vertices, up)]
+        normals = vertex_normals(vertices, faces)  # smooth shading, and a normal per vertex
+        lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in to_up(normals, up)]
+        lines += [
+            f"f {a + offset}//{a + normal_offset} {b + offset}//{b + normal_offset} "
+            f"{c + offset}//{c + normal_offset}"
+            for a, b, c in faces
+        ]
         offset += len(vertices)
+        normal_offset += len(normals)
     for group in groups:
         tentacles = group.positions[frame]
         if not tentacles.size:
@@ -87,29 +119,26 @@ def write_obj(
             lines += [f"g {group.name}", f"usemtl {group.material.name}"]
         if group.ribbon:
             vertices, faces, normals, _ = group.ribbon_meshes(frame)
-            lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in vertices]
-            lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in normals]
-            lines += [
-                f"f {a + offset}//{a + normal_offset} {b + offset}//{b + normal_offset} "
-                f"{c + offset}//{c + normal_offset}"
-                for a, b, c in faces
-            ]
-            offset += len(vertices)
-            normal_offset += len(normals)
-            continue
-        count, particles, _ = tentacles.shape
-        lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in tentacles.reshape(-1, 3)]
-        for k in range(count):
-            first = offset + k * particles
-            lines.append("l " + " ".join(str(first + i) for i in range(particles)))
-        offset += count * particles
+        else:  # threads as tubes: an OBJ line renders nowhere
+            count, particles, _ = tentacles.shape
+            vertices, normals = tube_vertices(tentacles, group.radii)
+            faces = tube_faces(count, particles)
+        lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in to_up(vertices, up)]
+        lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in to_up(normals, up)]
+        lines += [
+            f"f {a + offset}//{a + normal_offset} {b + offset}//{b + normal_offset} "
+            f"{c + offset}//{c + normal_offset}"
+            for a, b, c in faces
+        ]
+        offset += len(vertices)
+        normal_offset += len(normals)
     temporary = path.with_name(path.name + ".tmp")
     temporary.write_text("\n".join(lines) + "\n", encoding="ascii")
     temporary.replace(path)
 
 
 def export_obj(
-    result: Result, out: Path, frames: range, interpolation: int | None = None
+    result: Result, out: Path, frames: range, interpolation: int | None = None, up: str = "y"
 ) -> list[Path]:
     groups = _groups(result, interpolation)
     materials = None
@@ -125,7 +154,7 @@ def export_obj(
     paths = []
     for frame in frames:
         path = out / f"frame_{frame:05d}.obj"
-        write_obj(path, float(times[frame]), _bell(result, frame), groups, frame, materials)
+        write_obj(path, float(times[frame]), _bell(result, frame), groups, frame, materials, up)
         paths.append(path)
     return paths[:1]
 
