@@ -98,3 +98,13 @@ def test_help_shows_the_defaults(command: str, shown: list[str]) -> None:
     for fragment in shown:
         assert fragment in text, (fragment, text)
     assert "(default: None)" not in text and "(default: False)" not in text
+
+
+def test_a_frame_sequence_export_says_how_many_files(small: Path, tmp_path: Path) -> None:
+    done = jellysim(
+        "export", str(small), "--format", "obj", "--every", "2", "--out", str(tmp_path / "obj")
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(tmp_path / "obj" / "frame_00000.obj")
+    assert f"wrote 4 obj files in {tmp_path / 'obj'}" in done.stderr  # frames 0, 2, 4, 6
+    assert len(list((tmp_path / "obj").glob("frame_*.obj"))) == 4

@@ -343,7 +343,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     with open_result(args.dir) as result:
         out = Path(args.out) if args.out else None
         paths = export(result, args.fmt, out, frames, args.every, args.interpolation, args.up)
+        first, stop = frames if frames is not None else (0, result.frames)
     _print_paths(paths, args.quiet)
+    if args.fmt in ("obj", "ply") and paths and not args.quiet:
+        # A frame sequence: stdout names its first file; how many there are, on stderr.
+        count = len(range(first, stop, args.every))
+        print(f"jellysim: wrote {count} {args.fmt} files in {paths[0].parent}", file=sys.stderr)
     return 0
 
 
