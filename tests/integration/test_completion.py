@@ -61,6 +61,16 @@ def test_commands_options_values_presets_and_folders(script: Path, tmp_path: Pat
     assert complete(script, ["jellysim", "export", "d", "--format", "g"], tmp_path) == ["gltf"]
     assert complete(script, ["jellysim", "view", "out-"], tmp_path) == ["out-moon"]
     assert complete(script, ["jellysim", "show", "lions"], tmp_path) == ["lions-mane"]
+    # Names with spaces complete whole (bash escapes them: the function says -o filenames).
+    (tmp_path / "my runs").mkdir()
+    (tmp_path / "my scene.toml").write_text("duration = 1\n")
+    assert complete(script, ["jellysim", "view", "my"], tmp_path) == ["my runs"]
+    assert sorted(complete(script, ["jellysim", "run", "my"], tmp_path)) == [
+        "my runs",
+        "my scene.toml",
+        "my_scene.toml",
+    ]
+    assert "complete -o filenames -F _jellysim jellysim" in script.read_text()
 
 
 def test_zsh_gets_the_same_function_through_bashcompinit(script: Path) -> None:
@@ -70,7 +80,10 @@ def test_zsh_gets_the_same_function_through_bashcompinit(script: Path) -> None:
         text=True,
         check=True,
     )
-    assert done.stdout.startswith("autoload -U +X bashcompinit && bashcompinit\n")
+    assert done.stdout.splitlines()[:2] == [
+        "(( $+functions[compdef] )) || { autoload -Uz compinit && compinit; }",
+        "autoload -U +X bashcompinit && bashcompinit",
+    ]
     assert done.stdout.endswith(script.read_text())
 
 

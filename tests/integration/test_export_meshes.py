@@ -65,6 +65,17 @@ def test_obj_is_y_up_by_default(brown: jellysim.Result, tmp_path: Path) -> None:
     y_up = _obj_vertices(tmp_path / "y" / "frame_00003.obj")
     z_up = _obj_vertices(tmp_path / "z" / "frame_00003.obj")
     np.testing.assert_allclose(y_up, np.stack([z_up[:, 0], z_up[:, 2], -z_up[:, 1]], axis=1))
+    # The normals turn with the points, and every face's winding agrees with its normals.
+    mesh = meshio.read(tmp_path / "y" / "frame_00003.obj")
+    z_normals = meshio.read(tmp_path / "z" / "frame_00003.obj").point_data["obj:vn"]
+    normals = mesh.point_data["obj:vn"]
+    np.testing.assert_allclose(
+        normals, np.stack([z_normals[:, 0], z_normals[:, 2], -z_normals[:, 1]], axis=1), atol=1e-6
+    )
+    a, b, c = (mesh.points[mesh.cells_dict["triangle"][:, k]] for k in range(3))
+    facing = np.cross(b - a, c - a)
+    corners = normals[mesh.cells_dict["triangle"]].sum(axis=1)
+    assert np.mean(np.sum(facing * corners, axis=1) > 0.0) > 0.99
     assert "(m, y up)" in (tmp_path / "y" / "frame_00003.obj").read_text().splitlines()[0]
     # The bell hangs over its tentacles along the file's up axis.
     bell = len(brown.file[fields.BELL_SURFACE_VERTICES.path][3])

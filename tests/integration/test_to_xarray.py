@@ -60,3 +60,10 @@ def test_without_xarray_one_sentence_says_what_to_install(
     monkeypatch.setitem(__import__("sys").modules, "xarray", None)  # import xarray fails
     with jellysim.open_result(brown) as r, pytest.raises(jellysim.InputError, match="pip install"):
         r.to_xarray()
+
+
+def test_one_frame_by_a_numpy_integer_keeps_its_time_axis(brown: Path) -> None:
+    with jellysim.open_result(brown) as r:
+        one = r.to_xarray(frames=np.int64(4))
+        assert one.sizes["time"] == 1
+        np.testing.assert_array_equal(one["time"].values, r.time[4:5])

@@ -343,6 +343,13 @@ def test_the_package_ships_three_js_as_npm_installs_it() -> None:
     pinned = json.loads((REPOSITORY / "web" / "package.json").read_text())["dependencies"]["three"]
     assert json.loads((packaged / "three" / "package.json").read_text())["version"] == pinned
     assert (packaged / "three" / "LICENSE").is_file()
+    if (REPOSITORY / ".git").exists():  # committed, not only present (.gitignore has bitten)
+        listed = subprocess.run(
+            ["git", "ls-files", "src/jellysim/view/vendor"],
+            cwd=REPOSITORY, capture_output=True, text=True, check=True,
+        ).stdout.split()  # fmt: skip
+        for part in server.THREE_FILES.values():
+            assert f"src/jellysim/view/vendor/{part}" in listed, part
     npm = REPOSITORY / "web" / "node_modules"
     if (npm / "three").is_dir():  # a checkout after make web: the same bytes
         for part in server.THREE_FILES.values():

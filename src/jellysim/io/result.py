@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import ctypes
 import errno
+import numbers
 import os
 import shutil
 import struct
@@ -597,8 +598,8 @@ class Result:
                 "Result.to_xarray needs xarray, which is not installed: pip install xarray"
             ) from None
         chosen = slice(None) if frames is None else frames
-        if isinstance(chosen, int):
-            chosen = [chosen]
+        if isinstance(chosen, numbers.Integral):  # one frame: keep its time axis
+            chosen = [int(chosen)]
         variables = {}
         for field in fields.FIELDS:
             if field is fields.TIME or not self.has(field):
