@@ -33,6 +33,24 @@ from jellysim.fluid.mps import MPSSolver
 THIN = 0.5  # below this fraction of n0 the water counts as thin: its velocity fades to still
 
 
+def _weights(
+    points: np.ndarray, positions: np.ndarray, radius: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs (point row, particle col) closer than ``radius`` and their weights
+    w = r_e / r - 1 (Eq. S1), through k-d trees of both sets. A point on a particle (distance 0)
+    gets the weight ~1e9: that particle dominates."""
+    empty = np.zeros(0, dtype=np.int64)
+    if len(points) == 0 or len(positions) == 0:
+        return empty, empty, np.zeros(0)
+    near = cKDTree(points).sparse_distance_matrix(
+        cKDTree(positions), radius, output_type="coo_matrix"
+    )
+    rows, cols, distance = near.row, near.col, near.data
+    weight = radius / np.maximum(distance, 1e-9 * radius) - 1.0
+    inside = distance < radius
+    return rows[inside], cols[inside], weight[inside]
+
+
 def water_velocity_at(
     points: np.ndarray,
     positions: np.ndarray,
@@ -45,16 +63,7 @@ def water_velocity_at(
     density ``n0``."""
     points = np.asarray(points, dtype=np.float64)
     out = np.zeros_like(points)
-    if len(points) == 0 or len(positions) == 0:
-        return out
-    near = cKDTree(points).sparse_distance_matrix(
-        cKDTree(positions), radius, output_type="coo_matrix"
-    )
-    rows, cols, distance = near.row, near.col, near.data
-    # A point on a particle (distance 0) takes that particle's velocity: its weight is ~1e9.
-    weight = radius / np.maximum(distance, 1e-9 * radius) - 1.0
-    inside = distance < radius
-    rows, cols, weight = rows[inside], cols[inside], weight[inside]
+    rows, cols, weight = _weights(points, positions, radius)
     density = np.bincount(rows, weights=weight, minlength=len(points))
     for k in range(3):
         out[:, k] = np.bincount(rows, weights=weight * velocities[cols, k], minlength=len(points))
@@ -83,15 +92,7 @@ def spread_reaction(
     each particle receives; it sums to minus the impulses of the points that have a particle
     within ``radius`` (a point with none, out of the water, gives its reaction to nothing)."""
     out = np.zeros((len(positions), 3))
-    if len(points) == 0 or len(positions) == 0:
-        return out
-    near = cKDTree(points).sparse_distance_matrix(
-        cKDTree(positions), radius, output_type="coo_matrix"
-    )
-    rows, cols, distance = near.row, near.col, near.data
-    weight = radius / np.maximum(distance, 1e-9 * radius) - 1.0
-    inside = distance < radius
-    rows, cols, weight = rows[inside], cols[inside], weight[inside]
+    rows, cols, weight = _weights(points, positions, radius)
     total = np.bincount(rows, weights=weight, minlength=len(points))
     share = weight / total[rows]
     for k in range(3):

@@ -79,6 +79,21 @@ def write_mtl(path: Path, materials: list[Material]) -> None:
     temporary.replace(path)
 
 
+def _mesh_lines(
+    vertices: np.ndarray, normals: np.ndarray, faces: np.ndarray, offset: int, up: str
+) -> list[str]:
+    """A mesh's ``v``, ``vn`` and ``f v//vn`` lines, its vertices numbered from ``offset`` (its
+    normals too: one normal per vertex)."""
+    assert len(normals) == len(vertices)
+    lines = [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in to_up(vertices, up)]
+    lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in to_up(normals, up)]
+    lines += [
+        f"f {a + offset}//{a + offset} {b + offset}//{b + offset} {c + offset}//{c + offset}"
+        for a, b, c in faces
+    ]
+    return lines
+
+
 def write_obj(
     path: Path,
     time: float,
@@ -94,22 +109,15 @@ def write_obj(
     lines = [f"# jellysim frame at t = {time:.9g} s (m, {up} up)"]
     if materials is not None:
         lines.append(f"mtllib {materials}")
-    offset = normal_offset = 1
+    offset = 1  # every vertex has its normal, at the same index
     if bell is not None:
         vertices, faces = bell
         lines.append("o bell")
         if materials is not None:
             lines.append("usemtl bell")
-        lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in to_up(vertices, up)]
         normals = vertex_normals(vertices, faces)  # smooth shading, and a normal per vertex
-        lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in to_up(normals, up)]
-        lines += [
-            f"f {a + offset}//{a + normal_offset} {b + offset}//{b + normal_offset} "
-            f"{c + offset}//{c + normal_offset}"
-            for a, b, c in faces
-        ]
+        lines += _mesh_lines(vertices, normals, faces, offset, up)
         offset += len(vertices)
-        normal_offset += len(normals)
     for group in groups:
         tentacles = group.positions[frame]
         if not tentacles.size:
@@ -123,15 +131,8 @@ def write_obj(
             count, particles, _ = tentacles.shape
             vertices, normals = tube_vertices(tentacles, group.radii)
             faces = tube_faces(count, particles)
-        lines += [f"v {x:.7g} {y:.7g} {z:.7g}" for x, y, z in to_up(vertices, up)]
-        lines += [f"vn {x:.6g} {y:.6g} {z:.6g}" for x, y, z in to_up(normals, up)]
-        lines += [
-            f"f {a + offset}//{a + normal_offset} {b + offset}//{b + normal_offset} "
-            f"{c + offset}//{c + normal_offset}"
-            for a, b, c in faces
-        ]
+        lines += _mesh_lines(vertices, normals, faces, offset, up)
         offset += len(vertices)
-        normal_offset += len(normals)
     temporary = path.with_name(path.name + ".tmp")
     temporary.write_text("\n".join(lines) + "\n", encoding="ascii")
     temporary.replace(path)

@@ -810,23 +810,7 @@ def advance_frame(
                         if curled:
                             rhs[row + k] += dt * dt * rest_force[i, k]
                     # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its direction.
-                    lam = row + 3
-                    if i == 0:  # a free root has no segment before it: a decoupled dummy
-                        band[lam, 0] = -1.0
-                        rhs[lam] = 0.0
-                        continue
-                    e0 = x[i, 0] - x[i - 1, 0]
-                    e1 = x[i, 1] - x[i - 1, 1]
-                    e2 = x[i, 2] - x[i - 1, 2]
-                    inv = 1.0 / math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-                    normal = (e0 * inv, e1 * inv, e2 * inv)
-                    rhs[lam] = d
-                    for k in range(3):
-                        band[lam, 3 - k] = normal[k]
-                        if i - 1 >= first:
-                            band[lam, 7 - k] = -normal[k]
-                    if i - 1 < first:  # the segment from the prescribed root
-                        rhs[lam] += normal[0] * r[0] + normal[1] * r[1] + normal[2] * r[2]
+                    _assemble_constraint(band, rhs, row, i, first, x, r, d)
                 if first == 1:
                     # The prescribed root enters through the bending coupling, Eq. (T7).
                     for k in range(3):
