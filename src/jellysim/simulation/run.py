@@ -36,9 +36,35 @@ log = logging.getLogger(__name__)
 SCENE_FILE = "scene.toml"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
+# Kernels come from Numba's cache in well under a second (docs/performance.md); a preparation
+# still running after this long is compiling them, which a first run on a machine does for 10 to
+# 60 s. Then one line says so, instead of silence (docs/decisions.md, "A notice while kernels
+# compile").
+COMPILE_NOTICE_AFTER = 1.5  # s
+COMPILE_NOTICE = (
+    "compiling jellysim's kernels for this machine (a first run only: up to a minute; later "
+    "runs load them from Numba's cache)"
+)
+
 
 def default_out(scene: Scene) -> Path:
     return Path("out") / scene.name
+
+
+@contextmanager
+def _compile_notice(show: bool) -> Iterator[None]:
+    """While the body runs: once it has taken :data:`COMPILE_NOTICE_AFTER`, log
+    :data:`COMPILE_NOTICE` as a warning (seen on stderr with no logging set up), if ``show``."""
+    if not show:
+        yield
+        return
+    timer = threading.Timer(COMPILE_NOTICE_AFTER, log.warning, args=(COMPILE_NOTICE,))
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
@@ -66,14 +92,17 @@ def run(
     overrides: Mapping[str, Any] | None = None,
     force: bool = False,
     resume: bool = False,
-    quiet: bool = True,
+    quiet: bool | None = None,
     observers: list[Observer] | None = None,
     estimate_check: bool = True,
 ) -> Result:
     """Run a scene to ``out/result.h5`` (default ``out/<name>``) and return the open result.
 
     ``force`` replaces an existing result; ``resume`` continues it from its last checkpoint.
-    ``quiet=False`` shows a progress bar with ETA on runs longer than two seconds.
+    ``quiet=False`` shows a progress bar with ETA on runs longer than two seconds and the
+    estimate's line when the run is long; by default (None) neither shows, but a first run that
+    compiles the kernels says so in one line on stderr (a logging warning); ``quiet=True`` says
+    nothing.
     Before anything is allocated the run's memory, disk and time are estimated
     (:mod:`jellysim.simulation.estimate`): beyond the machine's memory or the folder's free
     space it is refused (InputError) unless ``estimate_check`` is False.
@@ -94,7 +123,7 @@ def run(
 
     check_writable(folder)
     replaced = result_path.stat().st_size if result_path.is_file() else 0  # or continued
-    check_costs(scene, folder, reclaimed=replaced, quiet=quiet, enforce=estimate_check)
+    check_costs(scene, folder, reclaimed=replaced, quiet=quiet is not False, enforce=estimate_check)
     # From here a stop signal ends the run at the next frame boundary (setting up included).
     with _stop_signals() as stop:
         loop = make_loop(scene)
@@ -165,7 +194,7 @@ def _run(
     folder: Path,
     scene_toml: str,
     resume: bool,
-    quiet: bool,
+    quiet: bool | None,
     stop: list[int],
 ) -> Result:
     """The run itself, the folder's writer lock held."""
@@ -208,10 +237,11 @@ def _run(
     every = scene.solver.checkpoint_every
     try:
         start = time.perf_counter()
-        loop.prepare()
+        with _compile_notice(show=quiet is not True):
+            loop.prepare()
         log.info("compiled kernels ready in %.1f s", time.perf_counter() - start)
         total, done = scene.frame_count - 1, loop.frame
-        with progress(total, done, quiet, "simulating", delay=2.0) as bar:
+        with progress(total, done, quiet is not False, "simulating", delay=2.0) as bar:
             while loop.frame < scene.frame_count - 1:
                 loop.step_frame()
                 writer.append(loop.frame_values())
