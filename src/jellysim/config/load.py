@@ -299,7 +299,7 @@ def _check_consistency(scene: Scene) -> None:
         )
     if scene.fluid.model == "mps":
         _check_fluid(scene)
-    if scene.flow.model == "fluid" and not (soft and scene.fluid.model == "mps"):
+    if scene.flow.model == "fluid" and not scene.has_water_for_tentacles:
         raise InputError(
             "flow.model = 'fluid' takes the water's velocity from the simulated fluid, and this "
             "scene has none: use it with bell.model = 'mass-spring' and fluid.model = 'mps' "
@@ -631,15 +631,28 @@ def scene_to_toml(scene: Scene) -> str:
     return tomli_w.dumps(scene_to_tree(scene))
 
 
+def recorded_tree(text: str) -> Tree:
+    """The tree of a scene text that a result or a checkpoint recorded, read as the run that
+    wrote it ran: a text without ``flow.model`` predates the key (issue 26; every text written
+    since records every key), and the one flow then was the paper's, "bell" (not the "auto"
+    default, which gives a soft bell in MPS water the simulated water)."""
+    tree = tomllib.loads(text)
+    flow = tree.get("flow")
+    if flow is None or (isinstance(flow, dict) and "model" not in flow):
+        tree["flow"] = {**(flow or {}), "model": "bell"}
+    return tree
+
+
 def same_scene(first: str, second: str) -> bool:
     """Whether two scene texts (TOML, as results and checkpoints record them) describe one scene
     under today's schema: a key that one text lacks takes its default. A key added to jellysim
     later is written into every new text at its default, which keeps the older behaviour; that
-    changes the text, not the scene (docs/decisions.md, "Slender drag and currents"). A text
-    that does not read as a scene is no match."""
+    changes the text, not the scene (docs/decisions.md, "Slender drag and currents"), except
+    ``flow.model``, whose default is no longer what older texts ran (:func:`recorded_tree`). A
+    text that does not read as a scene is no match."""
     if first == second:
         return True
     try:
-        return scene_from_tree(tomllib.loads(first)) == scene_from_tree(tomllib.loads(second))
+        return scene_from_tree(recorded_tree(first)) == scene_from_tree(recorded_tree(second))
     except (InputError, tomllib.TOMLDecodeError):
         return False

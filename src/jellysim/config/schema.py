@@ -67,10 +67,12 @@ class Flow:
         doc="correlation time of the smooth (Ornstein-Uhlenbeck) flow noise, one per tentacle",
     )
     model: str = param(
-        "bell",
+        "auto",
         kind="choice",
-        choices=("bell", "current", "fluid"),
-        doc="the water at the tentacles: 'bell', the paper's uniform flow relative to the bell "
+        choices=("auto", "bell", "current", "fluid"),
+        doc="the water at the tentacles: 'auto', 'fluid' in a scene with simulated water (a "
+        "soft bell in MPS water, Case 2) and 'bell' otherwise (Case 1); 'bell', the paper's "
+        "uniform flow relative to the bell "
         "along its axis (speed); 'current', a uniform current in the world frame, speed along "
         "direction, whatever the bell does; 'fluid', the simulated water's velocity at each "
         "particle (a scene with a fluid; speed then only sets the substep's speed scale); all "
@@ -701,6 +703,19 @@ class Scene:
     # The named groups [tentacles.NAME], in the scene's order; none: [tentacles] is the one group.
     # Not a TOML key of its own (the loader fills it from the sub-tables of [tentacles]).
     tentacle_groups: tuple[TentacleGroup, ...] = field(default=(), metadata={"internal": True})
+
+    def __post_init__(self) -> None:
+        # flow.model = "auto" resolves here, however the scene is made: the tentacles feel the
+        # simulated water where the scene has water for them (issue 26), and the scene (and so
+        # every text written of it) names the model it resolved to.
+        if self.flow.model == "auto":
+            model = "fluid" if self.has_water_for_tentacles else "bell"
+            object.__setattr__(self, "flow", dataclasses.replace(self.flow, model=model))
+
+    @property
+    def has_water_for_tentacles(self) -> bool:
+        """Whether the tentacles can feel a simulated water: a soft bell in MPS water."""
+        return self.bell.model == "mass-spring" and self.fluid.model == "mps"
 
     @property
     def frame_count(self) -> int:
