@@ -1,7 +1,8 @@
 // Load a .glb with three.js's GLTFLoader and play its first animation with an AnimationMixer.
 // Usage: node gltf_three_play.mjs NODE_MODULES FILE TIME...
-// Prints JSON: the clip's duration (s), the number of meshes, and per TIME the names of the
-// frame nodes (children of the scene's root node) whose scale is not zero.
+// Prints JSON: the clip's duration (s), the number of meshes and point clouds, and per TIME, per
+// mesh (by name), the morph targets (by name, three.js's morphTargetDictionary) whose influence
+// is not zero, and whether the mesh is shown (its scale not zero).
 import { readFile } from "node:fs/promises";
 import path from "node:path";
 import { pathToFileURL } from "node:url";
@@ -17,13 +18,18 @@ const gltf = await new GLTFLoader().parseAsync(data, "");
 const clip = gltf.animations[0];
 const mixer = new THREE.AnimationMixer(gltf.scene);
 mixer.clipAction(clip).play();
-let meshes = 0;
+const drawn = [];
 gltf.scene.traverse((object) => {
-  if (object.isMesh || object.isPoints) meshes += 1;
+  if (object.isMesh || object.isPoints) drawn.push(object);
 });
-const frames = gltf.scene.children[0].children;
 const shown = times.map((time) => {
   mixer.setTime(Number(time));
-  return frames.filter((node) => node.scale.x !== 0).map((node) => node.name);
+  const state = {};
+  for (const object of drawn) {
+    const names = Object.entries(object.morphTargetDictionary || {});
+    const on = names.filter(([, k]) => object.morphTargetInfluences[k] !== 0).map(([n]) => n);
+    state[object.name] = { targets: on, shown: object.parent.scale.x !== 0 && object.scale.x !== 0 };
+  }
+  return state;
 });
-process.stdout.write(JSON.stringify({ duration: clip.duration, meshes, shown }));
+process.stdout.write(JSON.stringify({ duration: clip.duration, meshes: drawn.length, shown }));

@@ -246,7 +246,7 @@ def test_scene_to_tree_omits_unset_keys_and_writes_lists() -> None:
 @pytest.mark.parametrize(
     ("value", "expected"),
     [
-        ("#ff8000", (1.0, 128 / 255, 0.0)),
+        ("#ff8000", (1.0, ((128 / 255 + 0.055) / 1.055) ** 2.4, 0.0)),  # sRGB, decoded
         ([0.1, 0.2, 0.3], (0.1, 0.2, 0.3)),
         ([0, 1, 0], (0.0, 1.0, 0.0)),
     ],

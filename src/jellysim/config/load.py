@@ -34,6 +34,14 @@ Tree = dict[str, Any]
 INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
 
 
+def linear_from_srgb(encoded: float) -> float:
+    """The linear value of an sRGB-encoded one in [0, 1] (IEC 61966-2-1), the inverse of
+    :func:`jellysim.render.materials.srgb`."""
+    if encoded <= 0.04045:
+        return encoded / 12.92
+    return ((encoded + 0.055) / 1.055) ** 2.4
+
+
 def suggest(name: str, candidates: Iterable[str]) -> str:
     close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
@@ -132,7 +140,9 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
         return tuple(float(c) for c in value)
     if kind == "color":
         if isinstance(value, str) and re.fullmatch(r"#[0-9A-Fa-f]{6}", value):
-            return tuple(int(value[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+            # "#rrggbb" is sRGB-encoded, as everywhere (CSS, colour pickers); colours are
+            # stored linear (docs/rendering.md), so it is decoded (IEC 61966-2-1).
+            return tuple(linear_from_srgb(int(value[i : i + 2], 16) / 255.0) for i in (1, 3, 5))
         if (
             not isinstance(value, (list, tuple))
             or len(value) != 3

@@ -7,16 +7,23 @@ and normal is rotated by (x, y, z) -> (x, z, -y), a proper rotation (determinant
 triangles keep their counter-clockwise winding seen from outside. A 2-D fluid's (x, y up) is
 first placed at (x, 0, y) as the renderers do, which lands at (x, y, 0).
 
-Representation: one node per exported frame, holding that frame's mesh, switched on and off by a
-``scale`` animation with STEP interpolation (1 while its frame shows, 0 otherwise). Chosen over
-morph targets because it plays in every viewer that plays glTF node animation (three.js's
-GLTFLoader and AnimationMixer, Blender's importer, which turns STEP into constant keyframes)
-with no limit on the frame count, whereas morph targets put one weight per frame in every
-keyframe (data growing as frames squared) and three.js and Blender slow down with thousands of
-targets. The animation data stays linear in the frame count: each frame node has at most three
-keyframes. Without playing the animation a viewer shows the part's first frame only.
+Representation: one node and one mesh per object (``bell``, each tentacle group's part,
+``fluid``), children of a root node named after the scene. A part's first frame is the mesh's
+own geometry; every later frame k is a morph target holding frame k's POSITION and NORMAL minus
+the first's; a ``weights`` animation with STEP interpolation sets target k's weight to 1 (the
+others 0) from frame k's time until the next frame's, so viewers draw one frame's geometry at a
+time: one draw call per object (three.js), one object with a shape key per frame (Blender's
+importer, STEP keys as constant keyframes). Morph targets need one vertex count and one
+triangle list per object over the frames: a ribbon group is built with the most centreline
+stations any exported frame needs (:meth:`~jellysim.export.groups.ExportGroup.ribbon_subdivisions`)
+and keeps all its grid triangles; a fluid keeps every particle, a dead one drawn on a live one
+of the same frame (a point drawn twice looks like one), and its node is scaled to 0 (STEP) at
+frames with no live particle. The weights grow as frames squared (one weight per target per
+keyframe), and three.js passes one uniform per target to its shaders, so a part holds at most
+``MORPH_FRAMES_MAX`` frames (docs/decisions.md). Without playing the animation a viewer shows
+the part's first frame.
 
-Each frame's mesh has a primitive per part, as the result has them:
+Each object is a mesh of one primitive, as the result has them:
 
 - the bell's surface triangles (``bell/surface_vertices``, ``bell/surface_faces``) with smooth
   vertex normals; translucent material (alphaMode BLEND);
@@ -40,10 +47,15 @@ rim and stripes are view-dependent shading glTF's core materials cannot express
 Long animations are split into parts so that no file nears GLB's 4 GiB (uint32) length limit or
 a viewer's memory: ``<name>_part000.glb``, ``<name>_part001.glb``, ... each hold a contiguous run
 of the requested frames and at most ``PART_BUDGET_BYTES`` (a part holds at least one frame
-whatever its size), and ``<name>.gltf-parts.json`` lists the parts with their frames and times.
-Every requested frame lands in exactly one part. Animation times are absolute, ``frame / fps``
-seconds, so parts played one after the other continue each other; each part's last frame is held
-for one frame interval (an extra keyframe at its end), so a part lasts as long as its frames do.
+whatever its size) and at most ``MORPH_FRAMES_MAX`` frames, and ``<name>.gltf-parts.json``
+lists the parts with their frames and times. Every requested frame lands in exactly one part.
+Animation times are absolute, ``frame / fps`` seconds, so parts played one after the other
+continue each other; each part's last frame is held for one frame interval (an extra keyframe at
+its end), so a part's animation spans exactly its frames' time: ``first / fps`` to
+``(last + every) / fps``. The glTF scene's ``extras`` carry ``fps``, ``frame_start`` and
+``frame_end`` (frame indices, as Blender numbers its frames when its frame rate is the fps):
+Blender's importer keeps glTF extras as custom properties of its scene but sets neither its
+frame range nor its frame rate from a file (docs/exports.md).
 """
 
 from __future__ import annotations
@@ -54,7 +66,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -64,7 +76,10 @@ from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
 from jellysim.render.materials import Material, bell_material, fluid_material
 
-PART_BUDGET_BYTES = 256 * 2**20  # most bytes of one .glb part (more only for a single frame)
+PART_BUDGET_BYTES = 512 * 2**20  # most bytes of one .glb part (more only for a single frame)
+MORPH_FRAMES_MAX = (
+    600  # most frames of one part: morph targets per mesh, plus its own (20 s at 30 fps)
+)
 TUBE_SIDES = 6  # vertices around a tentacle's tube at each particle
 JSON_BYTES_PER_FRAME = 4096  # an upper bound of the JSON one frame adds to a part (tested)
 JSON_BYTES_PER_GROUP = 1024  # and of what each tentacle group beyond the first adds to that
@@ -229,6 +244,15 @@ class _Part:
         return len(self.accessors) - 1
 
 
+class _Geometry(NamedTuple):
+    """One object at one frame, y up: ``positions`` (V, 3) m, ``normals`` (V, 3) unit or None
+    (points), ``shown`` False where it has nothing to draw (a fluid with no live particle)."""
+
+    positions: np.ndarray
+    normals: np.ndarray | None
+    shown: bool
+
+
 @dataclass(frozen=True)
 class _Source:
     """What one result contributes per frame, read once."""
@@ -238,37 +262,79 @@ class _Source:
     bell_vertices: Any  # h5py dataset (F, V, 3) m, or None
     bell_faces: np.ndarray | None  # (M, 3) int
     groups: list[ExportGroup]  # the tentacle groups, drawn
+    subdivisions: dict[str, int]  # per ribbon group's part: stations per segment (all frames)
     fluid_position: Any  # h5py dataset (F, K, D) m, or None
     fluid_alive: np.ndarray | None  # (F, K) bool
     look: Any  # jellysim.render.frame.Look
 
-    def frame_bytes(self, frame: int) -> int:
-        """Bytes of binary data frame ``frame`` adds to a part (vertex data and keyframes)."""
-        vec3 = 12
-        total = 3 * 4 + 3 * vec3  # at most three keyframes: times and scales
-        if self.bell_vertices is not None:
-            total += 2 * vec3 * self.bell_vertices.shape[1]
+    def objects(self) -> list[str]:
+        """The objects' names, in file order: ``bell``, each group's part, ``fluid``."""
+        names = ["bell"] if self.bell_faces is not None else []
+        names += [group.part for group in self.groups]
+        return names + (["fluid"] if self.fluid_position is not None else [])
+
+    def geometry(self, frame: int) -> dict[str, _Geometry]:
+        """Every object at ``frame`` (y up, float64)."""
+        out: dict[str, _Geometry] = {}
+        if self.bell_vertices is not None and self.bell_faces is not None:
+            vertices = np.asarray(self.bell_vertices[frame], dtype=np.float64)
+            normals = _bell_normals(vertices, self.bell_faces)
+            out["bell"] = _Geometry(to_y_up(vertices), to_y_up(normals), True)
         for group in self.groups:
             if group.ribbon:
-                arms = group.ribbon_meshes(frame)
-                total += 2 * vec3 * len(arms.vertices)
-                total += len(_padded(_indices(arms.faces).tobytes()))
+                arms = group.ribbon_meshes(frame, self.subdivisions[group.part])
+                positions, normals = arms.vertices, arms.normals
             else:
-                count, particles = group.positions.shape[1:3]
-                total += 2 * vec3 * count * (particles * TUBE_SIDES + 2)
-        if self.fluid_alive is not None:
-            total += vec3 * int(self.fluid_alive[frame].sum())
-        return total
+                positions, normals = tube_vertices(group.positions[frame], group.radii)
+            out[group.part] = _Geometry(to_y_up(positions), to_y_up(normals), True)
+        if self.fluid_position is not None and self.fluid_alive is not None:
+            points = _fluid_world(np.asarray(self.fluid_position[frame], dtype=np.float64))
+            alive = self.fluid_alive[frame]
+            if alive.any():  # a dead particle drawn on the first live one
+                points = np.where(alive[:, None], points, points[np.argmax(alive)])
+            out["fluid"] = _Geometry(to_y_up(points), None, bool(alive.any()))
+        return out
+
+    def ribbon_faces(self, group: ExportGroup, frame: int) -> np.ndarray:
+        """A ribbon group's triangles (M, 3), the same at every exported frame: each arm's whole
+        grid (:func:`~jellysim.render.ribbons.grid_faces`) at the group's subdivisions."""
+        from jellysim.render.ribbons import ROWS, grid_faces
+
+        arms = group.ribbon_meshes(frame, self.subdivisions[group.part])
+        counts = np.bincount(arms.arm, minlength=group.positions.shape[1])
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        faces = [
+            grid_faces(count // ROWS, ROWS).astype(np.int64) + offset
+            for count, offset in zip(counts, offsets, strict=True)
+            if count
+        ]
+        return np.concatenate(faces) if faces else np.empty((0, 3), np.int64)
+
+    def vertices(self) -> dict[str, int]:
+        """Vertices per object (the same at every frame)."""
+        first = self.geometry(0)
+        return {name: len(g.positions) for name, g in first.items()}
+
+    def frame_bytes(self) -> int:
+        """Bytes of binary data each frame adds to a part: its morph targets (POSITION and,
+        but for the fluid, NORMAL deltas), besides the weights (:func:`weights_bytes`)."""
+        vec3 = 12
+        return sum(
+            (1 if name == "fluid" else 2) * vec3 * count for name, count in self.vertices().items()
+        )
 
     def shared_bytes(self) -> int:
-        """Bytes of binary data every part holds once (the triangle indices)."""
+        """Bytes of binary data every part holds once (triangle indices)."""
         total = 0
         if self.bell_faces is not None:
             total += len(_padded(_indices(self.bell_faces).tobytes()))
         for group in self.groups:
-            if not group.ribbon:
+            if group.ribbon:
+                faces = self.ribbon_faces(group, 0)
+            else:
                 count, particles = group.positions.shape[1:3]
-                total += len(_padded(_indices(tube_faces(count, particles)).tobytes()))
+                faces = tube_faces(count, particles)
+            total += len(_padded(_indices(faces).tobytes()))
         return total
 
     def json_bytes_per_frame(self) -> int:
@@ -276,7 +342,14 @@ class _Source:
         return JSON_BYTES_PER_FRAME + JSON_BYTES_PER_GROUP * max(len(self.groups) - 1, 0)
 
 
-def _read(result: Result, interpolation: int | None) -> _Source:
+def weights_bytes(frames: int) -> int:
+    """Bytes of a part's keyframes over ``frames`` frames: times, and one weight per morph
+    target (``frames - 1``) at each keyframe (``frames + 1``), shared by every object; the
+    fluid's scales."""
+    return 4 * (frames + 1) * (1 + max(frames - 1, 0)) + 12 * (frames + 1)
+
+
+def _read(result: Result, interpolation: int | None, frames: range) -> _Source:
     from jellysim.render.pipeline import scene_look
 
     scene = result.scene
@@ -290,12 +363,14 @@ def _read(result: Result, interpolation: int | None) -> _Source:
             if result.has(fields.FLUID_ALIVE)
             else np.ones((result.frames, fluid.shape[1]), dtype=bool)
         )
+    groups = export_groups(result, look, interpolation)
     return _Source(
         fps=float(result.file.attrs["fps"]),
         name=scene.name,
         bell_vertices=result.dataset(fields.BELL_SURFACE_VERTICES) if has_bell else None,
         bell_faces=result.bell_surface_faces.astype(np.int64) if has_bell else None,
-        groups=export_groups(result, look, interpolation),
+        groups=groups,
+        subdivisions={g.part: g.ribbon_subdivisions(frames) for g in groups if g.ribbon},
         fluid_position=fluid,
         fluid_alive=alive,
         look=look,
@@ -303,17 +378,19 @@ def _read(result: Result, interpolation: int | None) -> _Source:
 
 
 def _plan_parts(source: _Source, frames: range, budget: int) -> list[range]:
-    """Split ``frames`` into contiguous runs whose .glb stays within ``budget`` bytes (a run
-    holds at least one frame). Every frame lands in exactly one run, in order."""
+    """Split ``frames`` into contiguous runs of at most ``MORPH_FRAMES_MAX`` frames whose .glb
+    stays within ``budget`` bytes (a run holds at least one frame). Every frame lands in exactly
+    one run, in order."""
     fixed = 28 + JSON_BYTES_FIXED + source.shared_bytes()  # GLB header and chunk headers: 28
+    extra = source.frame_bytes() + source.json_bytes_per_frame()
     parts: list[range] = []
-    start, size = 0, fixed
-    for k, frame in enumerate(frames):
-        extra = source.frame_bytes(frame) + source.json_bytes_per_frame()
-        if k > start and size + extra > budget:
+    start = 0
+    for k in range(1, len(frames)):
+        count = k - start + 1  # frames[start : k + 1]
+        size = fixed + count * extra + weights_bytes(count)
+        if count > MORPH_FRAMES_MAX or size > budget:
             parts.append(frames[start:k])
-            start, size = k, fixed
-        size += extra
+            start = k
     parts.append(frames[start:])
     return parts
 
@@ -338,33 +415,17 @@ def _material(material: Material, **extra: Any) -> dict[str, Any]:
     }
 
 
-def _keyframes(times: np.ndarray, index: int, hold: float) -> tuple[list[float], list[float]]:
-    """STEP keyframes (times s, scales) showing frame ``index`` of ``times`` only: from the
-    part's start it is hidden, then shown at its own time until the next frame's; the last frame
-    stays shown until ``hold`` seconds after its time."""
-    keys: list[tuple[float, float]] = []
-    if index > 0:
-        keys.append((float(times[0]), 0.0))
-    keys.append((float(times[index]), 1.0))
-    if index + 1 < len(times):
-        keys.append((float(times[index + 1]), 0.0))
-    else:
-        keys.append((float(times[index] + np.float32(hold)), 1.0))
-    return [t for t, _ in keys], [s for _, s in keys]
-
-
 def _build_part(
     source: _Source, frames: range, every: int, part: int, parts: int
 ) -> tuple[dict[str, Any], list[bytes]]:
     """The glTF JSON and the binary chunk (in 4-byte aligned pieces) of one part holding
-    ``frames``."""
+    ``frames``: a node and a mesh per object, later frames as morph targets."""
     look = source.look
     built = _Part()
     materials: list[dict[str, Any]] = []
-    shared: dict[str, tuple[int, int]] = {}  # primitive kind: (index accessor, material)
+    faces: dict[str, np.ndarray] = {}
+    material_of: dict[str, int] = {}
     if source.bell_faces is not None:
-        indices = _indices(source.bell_faces)
-        view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
         bell = bell_material(look)
         materials.append(
             _material(
@@ -374,111 +435,100 @@ def _build_part(
                 doubleSided=True,
             )
         )
-        shared["bell"] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
+        material_of["bell"], faces["bell"] = len(materials) - 1, source.bell_faces
     for group in source.groups:
         if group.ribbon:
             materials.append(_material(group.material, doubleSided=True))
-            shared[group.part] = (-1, len(materials) - 1)  # indices per frame
-            continue
-        count, particles = group.positions.shape[1:3]
-        indices = _indices(tube_faces(count, particles))
-        view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
-        materials.append(_material(group.material))
-        shared[group.part] = (built.accessor(view, 0, indices, "SCALAR"), len(materials) - 1)
+            faces[group.part] = source.ribbon_faces(group, frames[0])
+        else:
+            materials.append(_material(group.material))
+            count, particles = group.positions.shape[1:3]
+            faces[group.part] = tube_faces(count, particles)
+        material_of[group.part] = len(materials) - 1
     if source.fluid_position is not None:
         materials.append(_material(fluid_material()))
-        shared["fluid"] = (-1, len(materials) - 1)
+        material_of["fluid"] = len(materials) - 1
 
-    times = (np.asarray(frames, dtype=np.float64) / source.fps).astype(np.float32)
-    hold = every / source.fps
+    names = source.objects()
+    geometry = [source.geometry(frame) for frame in frames]
+    targets = len(frames) - 1
+    target_names = [f"frame_{frame:05d}" for frame in frames[1:]]
     meshes: list[dict[str, Any]] = []
-    frame_nodes: list[dict[str, Any]] = []
-    key_times: list[np.ndarray] = []
-    key_scales: list[np.ndarray] = []
-    for index, frame in enumerate(frames):
-        # Vertex data of the frame, all VEC3 float32, in one strided view.
-        arrays: list[tuple[str, np.ndarray]] = []
-        if source.bell_vertices is not None and source.bell_faces is not None:
-            vertices = np.asarray(source.bell_vertices[frame], dtype=np.float64)
-            arrays.append(("bell", to_y_up(vertices)))
-            arrays.append(("bell-normal", to_y_up(_bell_normals(vertices, source.bell_faces))))
-        ribbon_faces: dict[str, np.ndarray] = {}
-        for group in source.groups:
-            if group.ribbon:
-                positions, faces, normals, _ = group.ribbon_meshes(frame)
-                if not len(faces):
-                    continue
-                ribbon_faces[group.part] = faces
-            else:
-                positions, normals = tube_vertices(group.positions[frame], group.radii)
-            arrays.append((group.part, to_y_up(positions)))
-            arrays.append((f"{group.part}-normal", to_y_up(normals)))
-        if source.fluid_position is not None and source.fluid_alive is not None:
-            alive = source.fluid_alive[frame]
-            if alive.any():
-                points = np.asarray(source.fluid_position[frame], dtype=np.float64)[alive]
-                arrays.append(("fluid", to_y_up(_fluid_world(points))))
-        node: dict[str, Any] = {"name": f"frame_{frame:05d}"}
-        if arrays:
-            stored = [(name, np.ascontiguousarray(a, dtype=np.float32)) for name, a in arrays]
-            view = built.view(b"".join(a.tobytes() for _, a in stored), _ARRAY_BUFFER, 12)
-            accessors: dict[str, int] = {}
-            offset = 0
-            for name, array in stored:
-                accessors[name] = built.accessor(
-                    view, offset, array, "VEC3", bounds=not name.endswith("normal")
-                )
-                offset += array.nbytes
-            primitives = []
-            for name in ("bell", *(group.part for group in source.groups), "fluid"):
-                if name not in accessors:
-                    continue
-                indices_accessor, material = shared[name]
-                if name in ribbon_faces:
-                    indices = _indices(ribbon_faces[name])
-                    indices_view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
-                    indices_accessor = built.accessor(indices_view, 0, indices, "SCALAR")
-                attributes = {"POSITION": accessors[name]}
-                primitive: dict[str, Any] = {"attributes": attributes, "material": material}
-                if name == "fluid":
-                    primitive["mode"] = _POINTS
-                else:
-                    attributes["NORMAL"] = accessors[f"{name}-normal"]
-                    primitive["indices"] = indices_accessor
-                    primitive["mode"] = _TRIANGLES
-                primitives.append(primitive)
-            meshes.append({"name": f"frame_{frame:05d}", "primitives": primitives})
-            node["mesh"] = len(meshes) - 1
-        if index > 0:
-            node["scale"] = [0.0, 0.0, 0.0]
-        frame_nodes.append(node)
-        seconds, scales = _keyframes(times, index, hold)
-        key_times.append(np.asarray(seconds, dtype=np.float32))
-        key_scales.append(np.repeat(np.asarray(scales, dtype=np.float32), 3).reshape(-1, 3))
+    nodes: list[dict[str, Any]] = []
+    for name in names:
+        first = geometry[0][name]
+        arrays = [np.ascontiguousarray(first.positions, dtype=np.float32)]
+        if first.normals is not None:
+            arrays.append(np.ascontiguousarray(first.normals, dtype=np.float32))
+        view = built.view(b"".join(a.tobytes() for a in arrays), _ARRAY_BUFFER, 12)
+        attributes = {"POSITION": built.accessor(view, 0, arrays[0], "VEC3", bounds=True)}
+        if first.normals is not None:
+            attributes["NORMAL"] = built.accessor(view, arrays[0].nbytes, arrays[1], "VEC3")
+        primitive: dict[str, Any] = {"attributes": attributes, "material": material_of[name]}
+        if name in faces:
+            indices = _indices(faces[name])
+            indices_view = built.view(indices.tobytes(), _ELEMENT_ARRAY_BUFFER)
+            primitive["indices"] = built.accessor(indices_view, 0, indices, "SCALAR")
+            primitive["mode"] = _TRIANGLES
+        else:
+            primitive["mode"] = _POINTS
+        mesh: dict[str, Any] = {"name": name, "primitives": [primitive]}
+        if targets:
+            # Frame k's morph target: its POSITION (and NORMAL) minus the first frame's, in
+            # float64 before rounding, one view per attribute over all targets.
+            kinds = [("POSITION", "positions")]
+            if first.normals is not None:
+                kinds.append(("NORMAL", "normals"))
+            morphs: list[dict[str, int]] = [{} for _ in range(targets)]
+            for key, attribute in kinds:
+                base = getattr(first, attribute)
+                deltas = [
+                    np.ascontiguousarray(getattr(g[name], attribute) - base, dtype=np.float32)
+                    for g in geometry[1:]
+                ]
+                if any(d.shape != base.shape for d in deltas):
+                    raise JellysimError(f"glTF export: {name} changes its vertex count")
+                delta_view = built.view(b"".join(d.tobytes() for d in deltas), _ARRAY_BUFFER, 12)
+                for k, delta in enumerate(deltas):
+                    morphs[k][key] = built.accessor(
+                        delta_view, k * delta.nbytes, delta, "VEC3", bounds=key == "POSITION"
+                    )
+            primitive["targets"] = morphs
+            mesh["weights"] = [0.0] * targets
+            mesh["extras"] = {"targetNames": target_names}
+        meshes.append(mesh)
+        nodes.append({"name": name, "mesh": len(meshes) - 1})
 
-    # Keyframes: all inputs in one view, all outputs in another.
-    inputs_view = built.view(b"".join(t.tobytes() for t in key_times))
-    outputs_view = built.view(b"".join(s.tobytes() for s in key_scales))
-    samplers, channels = [], []
-    input_offset = output_offset = 0
-    for node_index, (seconds_array, scales_array) in enumerate(
-        zip(key_times, key_scales, strict=True)
-    ):
-        sampler = {
-            "input": built.accessor(
-                inputs_view, input_offset, seconds_array, "SCALAR", bounds=True
-            ),
-            "output": built.accessor(outputs_view, output_offset, scales_array, "VEC3"),
-            "interpolation": "STEP",
-        }
-        input_offset += seconds_array.nbytes
-        output_offset += scales_array.nbytes
-        samplers.append(sampler)
+    # Keyframes at each frame's time, and one frame interval after the last (its hold); STEP.
+    times = (np.asarray(frames, dtype=np.float64) / source.fps).astype(np.float32)
+    times = np.append(times, times[-1] + np.float32(every / source.fps))
+    samplers: list[dict[str, Any]] = []
+    channels: list[dict[str, Any]] = []
+    fluid_hides = "fluid" in names and not all(g["fluid"].shown for g in geometry)
+    keys = -1  # the keyframe times' accessor, written where a channel uses it
+    if targets or fluid_hides:
+        keys = built.accessor(built.view(times.tobytes()), 0, times, "SCALAR", bounds=True)
+    if targets:
+        weights = np.zeros((len(times), targets), dtype=np.float32)
+        weights[np.arange(1, targets + 1), np.arange(targets)] = 1.0  # frame k from its time
+        weights[-1] = weights[-2]  # the last frame held
+        output = built.accessor(built.view(weights.tobytes()), 0, weights.ravel(), "SCALAR")
+        samplers.append({"input": keys, "output": output, "interpolation": "STEP"})
+        for node_index in range(1, len(names) + 1):
+            channels.append({"sampler": 0, "target": {"node": node_index, "path": "weights"}})
+    if fluid_hides:
+        shown = np.array([g["fluid"].shown for g in geometry] + [geometry[-1]["fluid"].shown])
+        scales = np.repeat(shown.astype(np.float32), 3).reshape(-1, 3)
+        output = built.accessor(built.view(scales.tobytes()), 0, scales, "VEC3")
+        samplers.append({"input": keys, "output": output, "interpolation": "STEP"})
+        fluid_node = 1 + names.index("fluid")
         channels.append(
-            {"sampler": len(samplers) - 1, "target": {"node": node_index + 1, "path": "scale"}}
+            {"sampler": len(samplers) - 1, "target": {"node": fluid_node, "path": "scale"}}
         )
+        if not shown[0]:
+            nodes[fluid_node - 1]["scale"] = [0.0, 0.0, 0.0]
 
-    root = {"name": source.name, "children": list(range(1, len(frame_nodes) + 1))}
+    root = {"name": source.name, "children": list(range(1, len(nodes) + 1))}
     document: dict[str, Any] = {
         "asset": {
             "version": "2.0",
@@ -495,8 +545,20 @@ def _build_part(
             },
         },
         "scene": 0,
-        "scenes": [{"name": source.name, "nodes": [0]}],
-        "nodes": [root, *frame_nodes],
+        "scenes": [
+            {
+                "name": source.name,
+                "nodes": [0],
+                # Blender's importer keeps these as custom properties of its scene.
+                "extras": {
+                    "fps": source.fps,
+                    "frame_start": frames[0],
+                    "frame_end": frames[-1],
+                    "frame_step": every,
+                },
+            }
+        ],
+        "nodes": [root, *nodes],
         "meshes": meshes,
         "materials": materials,
         "animations": [{"name": source.name, "channels": channels, "samplers": samplers}],
@@ -504,6 +566,8 @@ def _build_part(
         "bufferViews": built.buffer_views,
         "buffers": [{"byteLength": built.length}],
     }
+    if not channels:
+        del document["animations"]
     for key in ("meshes", "materials"):
         if not document[key]:
             del document[key]
@@ -548,7 +612,7 @@ def export_gltf(
 ) -> list[Path]:
     """Write ``frames`` as ``OUT/<name>_partNNN.glb`` and the index ``OUT/<name>.gltf-parts.json``;
     returns the parts, then the index. ``budget``: bytes per part (``PART_BUDGET_BYTES``)."""
-    source = _read(result, interpolation)
+    source = _read(result, interpolation, frames)
     every = frames.step
     runs = _plan_parts(source, frames, PART_BUDGET_BYTES if budget is None else budget)
     paths = []

@@ -66,10 +66,24 @@ class ExportGroup:
     def ribbon(self) -> bool:
         return self.form == "ribbon"
 
-    def ribbon_meshes(self, frame: int) -> ArmsMesh:
+    def ribbon_subdivisions(self, frames: range) -> int:
+        """The centreline stations per particle segment that resolve every arm's ruffles at
+        every frame of ``frames`` (the most :func:`~jellysim.render.ribbons.stations_per_segment`
+        asks for): passed to :meth:`ribbon_meshes`, the arms keep one vertex count and grid
+        over those frames."""
+        from jellysim.render.ribbons import SUBDIVISIONS, finite_chain, stations_per_segment
+
+        return max(
+            stations_per_segment(finite_chain(chain), self.ruffles, SUBDIVISIONS)
+            for frame in frames
+            for chain in self.positions[frame]
+        )
+
+    def ribbon_meshes(self, frame: int, subdivisions: int | None = None) -> ArmsMesh:
         """Every arm of a ribbon group at ``frame`` as one mesh (built on each call, a few ms,
-        so that a long export holds no frame's ribbons but the one it writes)."""
-        from jellysim.render.ribbons import ribbon_mesh
+        so that a long export holds no frame's ribbons but the one it writes); ``subdivisions``
+        stations per particle segment at least (None: the renderers' minimum)."""
+        from jellysim.render.ribbons import SUBDIVISIONS, ribbon_mesh
 
         vertices, faces, normals, arm = [], [], [], []
         offset = 0
@@ -87,6 +101,7 @@ class ExportGroup:
                 self.ruffles,
                 self.ruffle_depth,
                 phase=ARM_PHASE * k,
+                subdivisions=SUBDIVISIONS if subdivisions is None else subdivisions,
             )
             vertices.append(mesh.vertices)
             normals.append(mesh.normals)

@@ -163,6 +163,14 @@ def grid_faces(stations: int, rows: int) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int32)
 
 
+def stations_per_segment(points: np.ndarray, ruffles: float, subdivisions: int) -> int:
+    """Centreline stations per particle segment of a ribbon along ``points`` (P, 3) m, Eq.
+    (R1): at least ``subdivisions``, and ``STATIONS_PER_RUFFLE`` per ruffle wavelength
+    (``ruffles`` per m) over its longest segment."""
+    segment = float(np.linalg.norm(np.diff(points, axis=0), axis=1).max())
+    return max(int(subdivisions), math.ceil(STATIONS_PER_RUFFLE * abs(ruffles) * segment))
+
+
 def ribbon_mesh(
     centreline: np.ndarray,
     outward: np.ndarray,
@@ -195,9 +203,7 @@ def ribbon_mesh(
     if len(points) < 2:
         return empty_mesh()
     across = max(int(across), 2)
-    segment = float(np.linalg.norm(np.diff(points, axis=0), axis=1).max())
-    resolved = math.ceil(STATIONS_PER_RUFFLE * abs(ruffles) * segment)
-    curve = catmull_rom(points, max(int(subdivisions), resolved))
+    curve = catmull_rom(points, stations_per_segment(points, ruffles, subdivisions))
     frames = ribbon_frames(curve, outward)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
     u = arc / arc[-1]  # (S,) 0 at the root, 1 at the tip
