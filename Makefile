@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-all lint docs clean venv povray web chromium tbb fish
+.PHONY: demo test test-all lint docs clean venv povray web chromium tbb fish blender
 
 # A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
 # lives in the python3-venv package: installed here when run as root, otherwise named.
@@ -90,6 +90,31 @@ fish:
 	    echo "note: fish is not installed; the shell-completion test skips it"; \
 	  fi; }
 
+# Blender as a Python module (bpy from PyPI, built for CPython 3.11 only) in its own venv, so
+# that its numpy pin stays out of jellysim's: the Blender import test runs the exported
+# import_into_blender.py with it, headless (Cycles on the CPU). bpy links X11, GL and xkbcommon
+# client libraries (no display is used): installed here from Debian when run as root.
+BPY_VERSION  := 5.0.1
+BLENDER_VENV ?= .venv-blender
+BPY_LIBS     := libx11-6 libxext6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libgl1
+blender:
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && \
+	  ! dpkg -s $(BPY_LIBS) >/dev/null 2>&1; then \
+	  echo "installing the libraries bpy links: $(BPY_LIBS)"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	    apt-get install -y -qq --no-install-recommends $(BPY_LIBS) >/dev/null; \
+	fi
+	@$(BLENDER_VENV)/bin/python -c 'import bpy' 2>/dev/null || { \
+	  py=; for p in $(PYTHON) python3.11; do \
+	    $$p -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null && { py=$$p; break; }; \
+	  done; \
+	  if [ -z "$$py" ]; then \
+	    echo "note: bpy $(BPY_VERSION) needs Python 3.11 (none found); the Blender import test skips"; \
+	  else \
+	    echo "installing bpy $(BPY_VERSION) into $(BLENDER_VENV) (about 400 MB)"; \
+	    $$py -m venv $(BLENDER_VENV) && $(BLENDER_VENV)/bin/python -m pip install -q "bpy==$(BPY_VERSION)"; \
+	  fi; }
+
 # The main job: simulate the brown-jelly preset, draw its figures and render its movie.
 demo: $(BIN)/jellysim povray web
 	$(BIN)/jellysim run purple-jelly --out $(OUT)/purple-jelly --force --set duration=6
@@ -105,11 +130,11 @@ demo: $(BIN)/jellysim povray web
 	@echo "Play it: $(BIN)/jellysim view $(OUT)/purple-jelly"
 
 # The tests CI runs: everything but the tests marked slow that guard no physics claim.
-test: $(BIN)/jellysim povray web chromium tbb fish
+test: $(BIN)/jellysim povray web chromium tbb fish blender
 	$(BIN)/python -m pytest -q --durations=25
 
 # Every test, slow ones included.
-test-all: $(BIN)/jellysim povray web chromium tbb fish
+test-all: $(BIN)/jellysim povray web chromium tbb fish blender
 	$(BIN)/python -m pytest -q --runslow
 
 lint: $(BIN)/jellysim
@@ -121,5 +146,5 @@ docs: $(BIN)/jellysim
 	$(BIN)/python -m jellysim.config.docs > docs/scene.md
 
 clean:
-	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache
+	rm -rf $(VENV) $(BLENDER_VENV) $(OUT) build src/*.egg-info .pytest_cache
 	find src tests -name __pycache__ -type d -prune -exec rm -rf {} +

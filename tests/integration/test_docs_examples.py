@@ -78,10 +78,15 @@ NOT_RUN = {
     "make test": "runs the test suite (what CI runs), this test included",
     "make web": "npm ci downloads three.js and the test tools from the registry (development "
     "only: the package ships three.js); 'make test' runs it before the suite",
-    "blender --python out/brown-jelly/export/usd/import_into_blender.py -- "
-    "out/brown-jelly/export/usd/brown-jelly.usdc": "needs Blender, which CI does not install; "
-    "the script is run against a stand-in bpy in tests/integration/test_export_usd.py, and "
-    "the export that writes it is run here (docs/exports.md)",
+    "blender --background --python out/brown-jelly/export/usd/import_into_blender.py -- "
+    "out/brown-jelly/export/usd/brown-jelly.usdc --render out/brown-jelly/blender/jelly.png "
+    "--save out/brown-jelly/blender/jelly.blend": "needs Blender, which CI does not install; "
+    "tests/integration/test_blender_import.py runs the script with bpy (.venv-blender) with "
+    "these options, and the export that writes it is run here (docs/exports.md)",
+    "python out/brown-jelly/export/usd/import_into_blender.py "
+    "out/brown-jelly/export/usd/brown-jelly.usdc --render out/brown-jelly/blender/jelly.png "
+    "--frames 0:50 --size 640x480": "needs the bpy module, in its own venv (.venv-blender), not "
+    "this one; tests/integration/test_blender_import.py runs it so, on a tiny result",
     "python3.11 -m venv /work/venv-bench": "docs/performance.md's record of how the benchmark's "
     "environment was made (PyElastica from PyPI), not a jellysim command",
     '/work/venv-bench/bin/python -m pip install -e ".[bench]"': "the same record: it downloads "

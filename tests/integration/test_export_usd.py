@@ -16,7 +16,13 @@ from jellysim import fields
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
 from jellysim.render.materials import bell_material, tentacle_material
-from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
+from jellysim.render.pipeline import (
+    FIELD_OF_VIEW,
+    VIEW_DIRECTION,
+    frame_cameras,
+    make_members,
+    scene_look,
+)
 
 pxr = pytest.importorskip("pxr", reason="usd-core is a test dependency (pip install -e .[test])")
 from pxr import Usd, UsdGeom, UsdShade, UsdValidation  # noqa: E402
@@ -178,7 +184,7 @@ def test_the_script_is_python_that_imports_bpy_only_inside_functions(blender_exp
             top_level |= {alias.name.split(".")[0] for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
             top_level.add(str(node.module).split(".")[0])
-    assert top_level <= {"__future__", "math", "sys", "pathlib", "typing"}  # no bpy, pxr, jellysim
+    assert top_level <= {"__future__", "argparse", "math", "sys", "pathlib", "typing"}  # no bpy
     inside = {
         function.name
         for function in ast.walk(tree)
@@ -186,11 +192,12 @@ def test_the_script_is_python_that_imports_bpy_only_inside_functions(blender_exp
         for node in ast.walk(function)
         if isinstance(node, ast.Import) and any(a.name == "bpy" for a in node.names)
     }
-    assert inside == {"main", "_material"}
+    assert inside == {"run", "_material"}
     with pytest.raises(ImportError):
         import bpy  # noqa: F401  (this test environment has no Blender)
-    with pytest.raises(SystemExit, match="run this script in Blender"):
-        _load_script(script_path).main(["blender", "--", "x.usdc"])
+    script = _load_script(script_path)
+    with pytest.raises(script.ScriptError, match="no Blender here"):
+        script.main(["blender", "--", "x.usdc"])  # from the text editor: an exception
 
 
 def test_the_script_reads_the_stage_metadata(blender_export) -> None:
@@ -206,12 +213,26 @@ def test_the_script_reads_the_stage_metadata(blender_export) -> None:
     assert settings["tentacle_radius"] == pytest.approx(look.tentacle_radius)
     assert (settings["first_frame"], settings["last_frame"], settings["frame_step"]) == (1, 3, 2)
     assert settings["fps"] == 10.0 and settings["stage_file"] == stage_path.name
-    assert script.stage_path_from_arguments(["blender", "--python", "s.py"], script_path) == (
-        stage_path.resolve()
-    )
-    assert script.stage_path_from_arguments(["b", "--", "/x/y.usdc"], script_path) == Path(
-        "/x/y.usdc"
-    )
+    assert script.stage_path(None, script_path) == stage_path.resolve()
+    assert script.stage_path(stage_path, "/elsewhere/s.py") == stage_path.resolve()
+    name = script_path.name
+    assert script.script_arguments(["blender", "--python", name], script_path) == []
+    assert script.script_arguments(["b", "-P", name, "--", "y.usdc"], script_path) == ["y.usdc"]
+    assert script.script_arguments([f"/d/{name}", "y.usdc", "--save", "a.blend"], name) == [
+        "y.usdc",
+        "--save",
+        "a.blend",
+    ]
+    assert script.from_command_line(["blender", "--python", f"/d/{name}", "--", "x"], name)
+    assert not script.from_command_line(["blender", "scene.blend"], name)  # the text editor
+    assert script.frames_to_render(settings, None) == [1]
+    assert script.frames_to_render(settings, (0, 9)) == [1, 3]  # the exported frames only
+    out = Path("/r/jelly.png")
+    assert script.render_paths(out, [1]) == [out]
+    assert script.render_paths(out, [1, 3]) == [
+        Path("/r/jelly_00001.png"),
+        Path("/r/jelly_00003.png"),
+    ]
 
     # The bounds hold the bell and every tentacle (with its radius) at every exported frame.
     stage = Usd.Stage.Open(str(stage_path))
@@ -243,32 +264,27 @@ def _rotation_xyz(angles: list[float]) -> np.ndarray:
     return rz @ ry @ rx  # Blender's XYZ Euler order
 
 
-def test_the_camera_frames_the_whole_animation(blender_export) -> None:
-    stage_path, _, script, _ = blender_export
+def test_the_camera_follows_the_path_of_jellysim_render(blender_export) -> None:
+    stage_path, _, script, result = blender_export
     settings = script.read_stage_settings(stage_path)
-    low, high = settings["bounds_min"], settings["bounds_max"]
     width, height = script.RESOLUTION
-    view = script.camera_placement(
-        low, high, settings["view_direction"], settings["field_of_view"], width / height
-    )
+    view = script.camera_placement(settings, width / height)
+    members = make_members([result], 1, 2, 0, fluid=False)
+    cameras, _, _ = frame_cameras(members, result.frames, (width, height), "follow")
+    np.testing.assert_allclose(view["first"], cameras[1].location, atol=1e-9)  # frames 1 to 3
+    np.testing.assert_allclose(view["last"], cameras[3].location, atol=1e-9)
     np.testing.assert_allclose(view["direction"], VIEW_DIRECTION / np.linalg.norm(VIEW_DIRECTION))
     assert view["angle"] == pytest.approx(np.radians(FIELD_OF_VIEW))
     rotation = _rotation_xyz(script.camera_rotation(view["direction"]))
     forward, up = rotation @ [0.0, 0.0, -1.0], rotation @ [0.0, 1.0, 0.0]
     np.testing.assert_allclose(forward, view["direction"], atol=1e-12)
     assert up[2] > 0.0 and abs(np.dot(rotation @ [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])) < 1e-12
-    right = rotation @ [1.0, 0.0, 0.0]
-    half_width = np.tan(view["angle"] / 2.0)
-    half_height = half_width * height / width
-    corners = np.array(
-        [[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])]
-    )
-    for corner in corners:
-        offset = corner - np.array(view["location"])
-        depth = offset @ forward
-        assert view["clip_start"] < depth < view["clip_end"]
-        assert abs(offset @ right) / depth < half_width
-        assert abs(offset @ up) / depth < half_height
+    # The jellysim stays within the clip range at every exported frame.
+    for frame, location in ((1, view["first"]), (3, view["last"])):
+        target = np.array(script.camera_target(settings, frame))
+        depth = (target - location) @ forward
+        assert view["clip_start"] < depth - np.linalg.norm(settings["camera_half"])
+        assert depth + np.linalg.norm(settings["camera_half"]) < view["clip_end"]
 
 
 def test_materials_lights_and_render_settings(blender_export) -> None:
@@ -290,17 +306,16 @@ def test_materials_lights_and_render_settings(blender_export) -> None:
     assert (frame["frame_start"], frame["frame_end"], frame["frame_step"]) == (1, 3, 2)
     assert frame["fps"] / frame["fps_base"] == pytest.approx(10.0)
     assert (frame["resolution_x"], frame["resolution_y"]) == script.RESOLUTION
+    assert script.render_settings(settings, (64, 48))["resolution_x"] == 64
     ntsc = script.render_settings({**settings, "fps": 30000 / 1001})
     assert (ntsc["fps"], ntsc["fps"] / ntsc["fps_base"]) == (30, pytest.approx(29.97, abs=1e-3))
 
-    centre = (np.array(settings["bounds_min"]) + settings["bounds_max"]) / 2.0
-    for light in script.light_rig(settings["bounds_min"], settings["bounds_max"]):
+    for light in script.light_rig(settings["camera_half"], 1.0):
         assert light["energy"] > 0.0
-        aim = _rotation_xyz(light["rotation"]) @ [0.0, 0.0, -1.0]  # lights shine along local -z
-        if light["type"] == "AREA":
-            to_centre = centre - light["location"]
-            np.testing.assert_allclose(aim, to_centre / np.linalg.norm(to_centre), atol=1e-12)
+        if light["type"] == "AREA":  # beside the camera, up and to the left, as its child
+            assert light["camera_offset"][0] < 0.0 < light["camera_offset"][1]
         else:
+            aim = _rotation_xyz(light["rotation"]) @ [0.0, 0.0, -1.0]  # along local -z
             assert aim[2] < 0.0  # the sun shines downwards
     assert script.curve_bevel_depth(1.0, 0.002) == 0.002  # radii not imported: the bevel's
     assert script.curve_bevel_depth(0.002, 0.002) == 1.0  # radii imported in metres

@@ -21,9 +21,11 @@ shared materials of :mod:`jellysim.render.materials`: ``diffuseColor``, ``opacit
 
 The root layer's ``customLayerData["jellysim"]`` holds what a renderer needs besides geometry:
 the scene's ``[look]`` colours, the exported frames (first, last, step) and fps, the bounding
-box of everything over those frames, and the renderers' camera direction and field of view.
+box of everything over those frames, and the renderers' camera: direction, field of view and
+the path ``jellysim render --camera follow`` moves it along.
 ``OUT/import_into_blender.py`` (the module :mod:`jellysim.export.blender_import`, with those
-settings embedded) sets the stage up in Blender: materials, world, camera, lights, frame range.
+settings embedded) sets the stage up in Blender: materials, world, a following camera, lights,
+frame range and fps, and renders or saves it.
 """
 
 from __future__ import annotations
@@ -78,9 +80,11 @@ def stage_settings(
     high: np.ndarray,
     stage_file: str,
     groups: Sequence[ExportGroup] = (),
+    camera: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The settings written into the stage's metadata and the Blender script (plain values);
-    ``groups`` of a scene of several add each group's prim name and colour."""
+    ``groups`` of a scene of several add each group's prim name and colour, ``camera``
+    (:func:`camera_path`) the path of the renderers' camera."""
     from jellysim._version import __version__
     from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 
@@ -106,6 +110,7 @@ def stage_settings(
         "fluid_color": [float(v) for v in fluid_material().base_color],
         "view_direction": [float(v) for v in VIEW_DIRECTION],
         "field_of_view": float(FIELD_OF_VIEW),
+        **(camera or {}),
         **(
             {
                 "group_prims": [prim_name(g.part) for g in groups],
@@ -114,6 +119,28 @@ def stage_settings(
             if len(groups) > 1
             else {}
         ),
+    }
+
+
+def camera_path(result: Result, interpolation: int | None) -> dict[str, Any]:
+    """Where ``jellysim render --camera follow`` looks (:func:`~jellysim.render.pipeline.
+    camera_targets`), as plain values: the point looked at in frame 0 (``camera_origin``, m), how
+    far it moves each frame (``camera_velocity``, m; the path is a straight line) and the
+    half-size of the box about it that holds the jellyfish in every frame (``camera_half``, m).
+    A result without a jellyfish (a fluid alone) takes ``--camera auto``'s choice, as a render
+    does; ``camera_mode`` names the mode used."""
+    from jellysim.render.pipeline import camera_targets, make_members
+
+    jellyfish = result.has(fields.TENTACLE_POSITION) or result.has(fields.BELL_SURFACE_VERTICES)
+    members = make_members([result], 1, interpolation, 0, fluid=not jellyfish)
+    frames = result.frames
+    targets, half, mode = camera_targets(members, frames, "follow" if jellyfish else "auto")
+    velocity = (targets[-1] - targets[0]) / (frames - 1) if frames > 1 else np.zeros(3)
+    return {
+        "camera_mode": mode,
+        "camera_origin": [float(v) for v in targets[0]],
+        "camera_velocity": [float(v) for v in velocity],
+        "camera_half": [float(v) for v in half],
     }
 
 
@@ -274,7 +301,9 @@ def export_usd(
             extent_attr.Set(Vt.Vec3fArray(box), frame)
             _bounds(low, high, box)
 
-    settings = stage_settings(scene, frames, float(f.attrs["fps"]), low, high, path.name, groups)
+    fps = float(f.attrs["fps"])
+    camera = camera_path(result, interpolation)
+    settings = stage_settings(scene, frames, fps, low, high, path.name, groups, camera)
 
     def stored(value: Any) -> Any:
         if not isinstance(value, list):

@@ -457,17 +457,19 @@ def _extent(result: Result, groups: Sequence[MemberGroup], fluid: bool = True) -
     return float(np.nanmax(np.nanmax(points, axis=1) - np.nanmin(points, axis=1)))
 
 
-def frame_cameras(
-    members: Sequence[Member], frames: int, size: tuple[int, int], mode: str
-) -> tuple[list[Camera], float, str]:
-    """A camera per frame, the framed extent (m) and the mode used.
+def camera_targets(
+    members: Sequence[Member], frames: int, mode: str
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """Where the camera looks at each frame, (F, 3) m, the half-size (3,) m of the box about
+    those points that holds everything drawn, and the mode used.
 
     ``fixed`` frames the union of every frame's bounding box; ``follow`` moves with the
     least-squares straight line through the jellyfish's centres (so the pulses of a swimmer's
     speed stay visible) and frames the largest box about it; ``auto`` follows when the centres
     travel further than the jellyfish's size, or, for several jellyfish (a school, which fills
     the picture), further than a quarter of the largest one's: so that the school stays in the
-    middle of the picture rather than drifting across a fixed one.
+    middle of the picture rather than drifting across a fixed one. Either way the targets lie
+    on a straight line, at constant speed.
     """
     boxes = np.stack([m.boxes()[:frames] for m in members])  # (J, F, 2, 3)
     low, high = boxes[:, :, 0].min(axis=0), boxes[:, :, 1].max(axis=0)  # (F, 3)
@@ -488,6 +490,16 @@ def frame_cameras(
         overall_low, overall_high = low.min(axis=0), high.max(axis=0)
         targets = np.broadcast_to(0.5 * (overall_low + overall_high), (frames, 3))
         half = 0.5 * (overall_high - overall_low)
+    return targets, half, mode
+
+
+def frame_cameras(
+    members: Sequence[Member], frames: int, size: tuple[int, int], mode: str
+) -> tuple[list[Camera], float, str]:
+    """A camera per frame, the framed extent (m) and the mode used (:func:`camera_targets`):
+    looking along :data:`VIEW_DIRECTION` from the nearest distance at which the framed box fits
+    the picture of ``size`` (width, height) pixels."""
+    targets, half, mode = camera_targets(members, frames, mode)
     width, height = size
     direction = VIEW_DIRECTION / np.linalg.norm(VIEW_DIRECTION)
     probe = Camera(location=-direction, look_at=np.zeros(3), angle=FIELD_OF_VIEW)
