@@ -8,7 +8,6 @@ are one brown-jelly tentacle for a fraction of a second (tens of frames)."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -66,7 +65,10 @@ def assert_same_sweep(first: Path, second: Path, name: str = TABLE) -> None:
         else:
             assert x.tolist() == y.tolist(), variable
     for folder in a["folder"].values:
-        with h5py.File(first / folder / "result.h5") as x, h5py.File(second / folder / "result.h5") as y:
+        with (
+            h5py.File(first / folder / "result.h5") as x,
+            h5py.File(second / folder / "result.h5") as y,
+        ):
             assert np.array_equal(x["tentacles/position"][()], y["tentacles/position"][()])
             assert np.array_equal(x["tentacles/velocity"][()], y["tentacles/velocity"][()])
 
@@ -75,8 +77,19 @@ def assert_same_sweep(first: Path, second: Path, name: str = TABLE) -> None:
 def local_grid(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 2 x 2 grid run over two local processes, uninterrupted."""
     cwd = tmp_path_factory.mktemp("local")
-    done = jellysim(cwd, "sweep", "brown-jelly", *GRID, *TINY, "--set", "duration=0.5",
-                    "--workers", "2", "--out", "grid")
+    done = jellysim(
+        cwd,
+        "sweep",
+        "brown-jelly",
+        *GRID,
+        *TINY,
+        "--set",
+        "duration=0.5",
+        "--workers",
+        "2",
+        "--out",
+        "grid",
+    )
     assert done.returncode == 0, done.stderr
     return cwd / "grid"
 
@@ -96,23 +109,49 @@ def test_a_grid_is_every_combination_in_one_tidy_table(local_grid: Path) -> None
     late = slice(8, 16)
     root, tip = points["root_x_m"].values[:, late], points["tip_x_m"].values[:, late]
     assert np.array_equal(points["root_x_range_m"].values, np.ptp(root, axis=1))
-    assert np.array_equal(points["tip_to_root_range"].values, np.ptp(tip, axis=1) / np.ptp(root, axis=1))
+    assert np.array_equal(
+        points["tip_to_root_range"].values, np.ptp(tip, axis=1) / np.ptp(root, axis=1)
+    )
     assert (local_grid / f"{TABLE}.png").stat().st_size > 0
 
 
 def test_a_dask_cluster_gives_the_same_numbers(
     local_grid: Path, scheduler: str, tmp_path: Path
 ) -> None:
-    done = jellysim(tmp_path, "sweep", "brown-jelly", *GRID, *TINY, "--set", "duration=0.5",
-                    "--scheduler", scheduler, "--out", "grid")
+    done = jellysim(
+        tmp_path,
+        "sweep",
+        "brown-jelly",
+        *GRID,
+        *TINY,
+        "--set",
+        "duration=0.5",
+        "--scheduler",
+        scheduler,
+        "--out",
+        "grid",
+    )
     assert done.returncode == 0, done.stderr
     assert "4 points in grid: 0 finished before, 0 resumed from a checkpoint, 4 run" in done.stderr
     assert_same_sweep(local_grid, tmp_path / "grid")
 
 
 def test_zip_pairs_the_lists(tmp_path: Path) -> None:
-    done = jellysim(tmp_path, "sweep", "brown-jelly", *GRID, "--zip", *TINY,
-                    "--set", "duration=0.2", "--workers", "1", "--out", "zip", "--quiet")
+    done = jellysim(
+        tmp_path,
+        "sweep",
+        "brown-jelly",
+        *GRID,
+        "--zip",
+        *TINY,
+        "--set",
+        "duration=0.2",
+        "--workers",
+        "1",
+        "--out",
+        "zip",
+        "--quiet",
+    )
     assert done.returncode == 0 and done.stdout == done.stderr == ""
     points = table(tmp_path / "zip")
     assert list(points["flow.speed"].values) == [0, 0.5]
@@ -134,7 +173,8 @@ def _kill_mid_way(process: subprocess.Popen[str], out: Path, frames: int) -> dic
                 progress[folder] = 0
         done = [f for f, frame in progress.items() if frame == frames]
         partial = [
-            f for f, frame in progress.items()
+            f
+            for f, frame in progress.items()
             if 0 < frame < frames - 5 and (f / CHECKPOINT_FILE).is_file()
         ]
         if done and partial:
@@ -152,11 +192,21 @@ def _kill_mid_way(process: subprocess.Popen[str], out: Path, frames: int) -> dic
 def test_a_killed_sweep_keeps_its_finished_points_and_resumes_the_others(
     where: str, request: pytest.FixtureRequest, tmp_path: Path
 ) -> None:
-    spread = ["--workers", "2"] if where == "processes" else [
-        "--scheduler", request.getfixturevalue("scheduler")
+    spread = (
+        ["--workers", "2"]
+        if where == "processes"
+        else ["--scheduler", request.getfixturevalue("scheduler")]
+    )
+    args = [
+        "sweep",
+        "brown-jelly",
+        "--vary",
+        "flow.speed=0,0.2,0.4,0.6",
+        *TINY,
+        "--set",
+        "duration=2",
+        *spread,
     ]
-    args = ["sweep", "brown-jelly", "--vary", "flow.speed=0,0.2,0.4,0.6", *TINY,
-            "--set", "duration=2", *spread]
     killed = subprocess.Popen(
         [sys.executable, "-m", "jellysim", *args, "--out", "killed", "--quiet"],
         cwd=tmp_path,

@@ -63,7 +63,9 @@ def listed(points: Sequence[Mapping[str, Any]]) -> Plan:
 def split_values(text: str) -> list[str]:
     """``text`` split at the commas outside brackets and quotes, so a value may be a TOML array
     (``[0,0,-9.81],[0,0,-1.62]``) or a string with a comma (``"a,b"``)."""
-    parts, current, depth, quote = [], [], 0, ""
+    parts: list[str] = []
+    current: list[str] = []
+    depth, quote = 0, ""
     for char in text:
         if quote:
             quote = "" if char == quote else quote

@@ -24,7 +24,7 @@ from jellysim.config.load import same_scene
 from jellysim.errors import InputError, JellysimError
 from jellysim.io.checkpoint import CHECKPOINT_FILE
 from jellysim.io.result import RESULT_FILE, Result
-from jellysim.simulation import run
+from jellysim.simulation.run import run
 from jellysim.studies.traces import format_value
 
 POINTS_FOLDER = "points"

@@ -146,7 +146,9 @@ def run_sweep(
             output_folder(folder)
         texts = [scene_to_toml(loaded) for loaded in scenes]
         folders = [point_folder(folder, text) for text in texts]
-        outcomes = _run_points(scenes, texts, folders, workers, cluster, quiet, estimate_check, stack)
+        outcomes = _run_points(
+            scenes, texts, folders, workers, cluster, quiet, estimate_check, stack
+        )
         failed = [o for o in outcomes.values() if o.status]
         if failed:
             first = min(failed, key=lambda o: o.index)
@@ -315,7 +317,7 @@ def _start_worker(parent: int, threads: int) -> None:
         os._exit(1)
     import numba
 
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
 
 
 def _dask_executor(scheduler: str, stack: ExitStack) -> cf.Executor:
@@ -348,6 +350,8 @@ def _dask_executor(scheduler: str, stack: ExitStack) -> cf.Executor:
         client = distributed.Client(**where, set_as_default=False)  # type: ignore[arg-type]
     except (OSError, TimeoutError, ValueError) as err:
         reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise InputError(f"--scheduler {scheduler}: cannot reach a Dask scheduler ({reason})") from None
+        raise InputError(
+            f"--scheduler {scheduler}: cannot reach a Dask scheduler ({reason})"
+        ) from None
     stack.callback(client.close)
     return client.get_executor(pure=False)
