@@ -218,8 +218,12 @@ def test_a_killed_sweep_keeps_its_finished_points_and_resumes_the_others(
     again = jellysim(tmp_path, *args, "--out", "killed")
     assert again.returncode == 0, again.stderr
     summary = again.stderr.strip().splitlines()[-1]
-    assert f"{len(kept)} finished before" in summary, summary
-    assert "0 resumed" not in summary, summary
+    counts = [
+        int(word) for word in summary.split(":")[-1].replace(",", " ").split() if word.isdigit()
+    ]
+    before, resumed, ran = counts
+    # A point may finish between the last look and the kill: at least those seen finished.
+    assert before >= len(kept) and resumed >= 1 and before + resumed + ran == 4, summary
     for name, stamp in kept.items():  # not run again
         result = tmp_path / "killed" / POINTS_FOLDER / name / "result.h5"
         assert result.stat().st_ino + result.stat().st_mtime_ns == stamp
