@@ -1,6 +1,7 @@
 """`jellysim sweep` as a user runs it."""
 
 import csv
+import os
 import subprocess
 import sys
 
@@ -8,8 +9,10 @@ import matplotlib.image
 
 
 def jellysim(cwd, *args):
+    # A scheduler that does not answer is given up after a second, not Dask's 30.
+    env = {**os.environ, "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "1s"}
     return subprocess.run(
-        [sys.executable, "-m", "jellysim", *args], cwd=cwd, capture_output=True, text=True
+        [sys.executable, "-m", "jellysim", *args], cwd=cwd, capture_output=True, text=True, env=env
     )
 
 
@@ -32,7 +35,12 @@ def test_sweep_writes_a_labelled_figure_and_the_traces(tmp_path):
     assert proc.returncode == 0, proc.stderr
     png = tmp_path / "figs" / "sweep_flow_speed.png"
     table = tmp_path / "figs" / "sweep_flow_speed.csv"
-    assert proc.stdout.split() == ["figs/sweep_flow_speed.png", "figs/sweep_flow_speed.csv"]
+    assert proc.stdout.split() == [
+        "figs/sweep_flow_speed.png",
+        "figs/sweep_flow_speed.csv",
+        "figs/sweep_flow_speed_points.csv",
+        "figs/sweep_flow_speed.nc",
+    ]
     image = matplotlib.image.imread(png)
     assert image.shape[0] > 300 and image.std() > 0.05
     with open(table, newline="") as handle:
@@ -43,7 +51,15 @@ def test_sweep_writes_a_labelled_figure_and_the_traces(tmp_path):
 
 
 def test_sweep_rejects_bad_values_before_writing(tmp_path):
-    for args in (("--key", "flow.sped", "--values", "1"), ("--key", "flow.speed", "--values", ",")):
+    for args in (
+        ("--key", "flow.sped", "--values", "1"),
+        ("--key", "flow.speed", "--values", ","),
+        ("--vary", "flow.speed=0,1", "--vary", "tentacles.count=1,2,3", "--zip"),
+        ("--vary", "flow.speed"),
+        ("--vary", "flow.speed=1", "--workers", "0"),
+        ("--vary", "flow.speed=1", "--scheduler", "not-an-address"),
+        ("--vary", "flow.speed=1", "--scheduler", "tcp://127.0.0.1:9"),  # nothing listens
+    ):
         proc = jellysim(tmp_path, "sweep", "brown-jelly", *args, "--out", "figs")
         assert proc.returncode == 2
         assert len(proc.stderr.strip().splitlines()) <= 3 and "Traceback" not in proc.stderr
@@ -57,3 +73,26 @@ def test_an_unreadable_value_is_named_as_the_values_option(tmp_path):
     assert proc.stderr.strip() == (
         "jellysim: error: --values: cannot read the value 'a b' as a TOML value"
     )
+
+
+def test_a_point_that_fails_is_one_line_and_its_status(tmp_path):
+    """A point the worker refuses (its run would not fit on the disk) ends the sweep with that
+    point named and its exit status; the other points are kept for the next run."""
+    proc = jellysim(
+        tmp_path,
+        "sweep",
+        "brown-jelly",
+        "--vary",
+        "duration=0.1,1e6",
+        "--set",
+        "tentacles.count=1",
+        "--out",
+        "figs",
+        "--quiet",
+    )
+    assert proc.returncode == 2
+    (line,) = proc.stderr.strip().splitlines()
+    assert line.startswith("jellysim: error: point 1 (duration = 1e+06): the run would write")
+    assert "run the sweep again to continue" in line
+    assert len(list((tmp_path / "figs" / "points").glob("*/result.h5"))) == 1
+    assert not list((tmp_path / "figs").glob("sweep_*"))

@@ -585,7 +585,7 @@ def check_printed(command: Command, printed: str, cwd: Path) -> None:
             assert {Path(line).parent for line in lines} == {expected}
             assert all(line.endswith(".png") for line in lines)
         if command.name == "sweep":
-            assert {Path(line).suffix for line in lines} == {".png", ".csv"}
+            assert {Path(line).suffix for line in lines} == {".png", ".csv", ".nc"}
     elif command.name == "render":
         out = Path(args.out) if args.out else Path(args.dirs[0]) / "render"
         assert lines[0].startswith(str(out / "frames")), lines

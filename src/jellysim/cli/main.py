@@ -82,11 +82,27 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--quiet", action="store_true", help="print nothing")
 
     sweep = sub.add_parser(
-        "sweep", help="run a scene once per value of a key; root and tip x against time"
+        "sweep",
+        help="run a scene once per point of one or more keys (a grid, or a list with --zip), "
+        "the points at once; root and tip x against time, a table of the points",
     )
     sweep.add_argument("scene", help="preset name or path to a .toml")
-    sweep.add_argument("--key", required=True, help="the scene key to vary, e.g. flow.speed")
-    sweep.add_argument("--values", required=True, help="comma-separated TOML values")
+    sweep.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=V1,V2,...",
+        help="a scene key and its comma-separated TOML values (repeatable: every combination of "
+        "the keys' values is a point)",
+    )
+    sweep.add_argument(
+        "--zip",
+        action="store_true",
+        help="pair the --vary lists in order (point i takes each key's i-th value) instead of "
+        "every combination",
+    )
+    sweep.add_argument("--key", help="a key to vary, with --values (the same as --vary KEY=...)")
+    sweep.add_argument("--values", help="the comma-separated TOML values of --key")
     _add_set_option(sweep, "KEY=VALUE", "override a scene key for every run")
     sweep.add_argument(
         "--tentacle",
@@ -94,8 +110,30 @@ def _parser() -> argparse.ArgumentParser:
         default=0,
         help="which simulated tentacle, numbered across the tentacle groups in order (default 0)",
     )
-    sweep.add_argument("--out", default="out/sweeps", help="folder for the figure and the CSV")
+    sweep.add_argument(
+        "--out",
+        default="out/sweeps",
+        help="the sweep's folder: each point's run (points/), the table and the figure; run the "
+        "same sweep again to keep its finished points and resume a killed one",
+    )
     sweep.add_argument("--title", default="", help="figure title")
+    sweep.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="points run at once, each in its own local process (default: one per core)",
+    )
+    sweep.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the points on the Dask cluster whose scheduler is at ADDRESS (e.g. "
+        "tcp://10.0.0.5:8786); its workers must share --out (docs/sweeps.md)",
+    )
+    sweep.add_argument(
+        "--no-estimate-check",
+        action="store_true",
+        help="run points whose estimated memory or disk exceeds what the machine has",
+    )
     sweep.add_argument("--quiet", action="store_true", help="print nothing")
 
     render = sub.add_parser("render", help="frames and a video of one or more results")
@@ -250,24 +288,58 @@ def _print_paths(paths: Sequence[object], quiet: bool) -> None:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from jellysim.config.load import parse_value
-    from jellysim.studies import plot_sweep, sweep, write_traces_csv
+    from jellysim.studies import (
+        grid,
+        plot_sweep,
+        run_sweep,
+        summary_dataset,
+        traces_from_dataset,
+        write_table,
+        write_traces_csv,
+    )
+    from jellysim.studies.plan import axes_from_command_line
 
-    values = [parse_value(item, "--values") for item in args.values.split(",") if item.strip()]
-    if not values:
-        raise InputError("--values: give at least one value, e.g. --values 100,2.4e5,9e9")
-    traces = sweep(args.scene, args.key, values, args.overrides, args.tentacle)
+    plan = grid(axes_from_command_line(args.key, args.values, args.vary), args.zip)
+    done = run_sweep(
+        args.scene,
+        plan,
+        args.overrides,
+        args.tentacle,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        quiet=args.quiet,
+        estimate_check=not args.no_estimate_check,
+    )
     folder = Path(args.out)
+    stem = folder / ("sweep_" + "_".join(key.replace(".", "_") for key in plan.keys))
+    table = stem.with_name(stem.name + "_points.csv")
+    netcdf = stem.with_suffix(".nc")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        stem = folder / f"sweep_{args.key.replace('.', '_')}"
+        write_table(
+            summary_dataset(done.traces, plan.keys, done.point_folders, args.tentacle),
+            table,
+            netcdf,
+        )
+        import xarray
+
+        with xarray.open_dataset(netcdf, engine="h5netcdf") as written:
+            traces = traces_from_dataset(written)  # the figure draws what the table holds
         paths = [
-            plot_sweep(traces, args.key, stem.with_suffix(".png"), args.title),
-            write_traces_csv(traces, args.key, stem.with_suffix(".csv")),
+            plot_sweep(traces, stem.with_suffix(".png"), args.title),
+            write_traces_csv(traces, stem.with_suffix(".csv")),
+            table,
+            netcdf,
         ]
     except OSError as err:
-        raise InputError(f"--out {folder}: cannot write ({err.strerror})") from None
+        raise InputError(f"--out {folder}: cannot write ({err.strerror or err})") from None
     _print_paths(paths, args.quiet)
+    if not args.quiet:
+        print(
+            f"jellysim sweep: {len(plan.points)} points in {folder}: {done.kept} finished "
+            f"before, {done.resumed} resumed from a checkpoint, {done.started} run",
+            file=sys.stderr,
+        )
     return 0
 
 

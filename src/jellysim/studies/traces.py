@@ -1,35 +1,36 @@
-"""Parameter sweeps: the paper's Figs. 5, 7 and 8 (root and tip x against time as one key varies).
-
-``jellysim sweep SCENE --key tentacles.youngs_modulus --values 100,2.4e5,9e9`` runs the scene once
-per value (in memory, nothing but the figure and a CSV written) and draws the root's and the
-tips' x against time, one curve per value, labelled.
-"""
+"""The traces of a sweep: a tentacle's root and tip x against time, one per point, as the
+paper's Figs. 5, 7 and 8 draw them (root red, tip blue, one panel per point, labelled)."""
 
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jellysim import fields
-from jellysim.config import Scene, load_scene
-from jellysim.config.load import parse_override
+from jellysim.config import Scene
 from jellysim.errors import InputError
-from jellysim.simulation import Simulation, make_loop
 
 
 @dataclass(frozen=True)
 class Trace:
-    """x (m) of a tentacle's root and tip at the frame times (s) of one run."""
+    """x (m) of a tentacle's root and tip, (F,) each, at the frame times (s), (F,), of one run;
+    ``point`` maps each swept key to its value in that run, and ``value`` is that value (one
+    key) or the tuple of them in the keys' order (several)."""
 
     value: Any
     time: np.ndarray
     root_x: np.ndarray
     tip_x: np.ndarray
+    point: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """``key = value, ...``: the point, for a figure's panel."""
+        return ", ".join(f"{key} = {format_value(value)}" for key, value in self.point.items())
 
     def late(self, fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
         """Root and tip x over the last ``fraction`` of the run (after the start-up transient)."""
@@ -42,43 +43,7 @@ class Trace:
         return float(np.ptp(tip) / np.ptp(root))
 
 
-def sweep(
-    scene: str | Path | Mapping[str, Any],
-    key: str,
-    values: Sequence[Any],
-    overrides: Mapping[str, Any] | Sequence[str] | None = None,
-    tentacle: int = 0,
-) -> list[Trace]:
-    """Run ``scene`` once per value of ``key``; the traces of ``tentacle``'s root and tip.
-
-    ``tentacle`` numbers the simulated tentacles across every group, in the scene's order (the
-    result's T axis: ``tentacles/group`` tells its group); its tip is its own last particle."""
-    base: dict[str, Any] = (
-        dict(overrides)
-        if isinstance(overrides, Mapping)
-        else dict(parse_override(item) for item in overrides or [])
-    )
-    traces = []
-    for value in values:
-        loaded = load_scene(scene, {**base, key: value})
-        if loaded.tentacle_count == 0:
-            raise InputError(
-                f"{loaded.name} has no tentacles (tentacles.count = 0): a sweep traces a "
-                "tentacle's root and tip; set tentacles.count"
-            )
-        particles = _own_particles(loaded, tentacle)
-        loop = make_loop(loaded)
-        xs = [_root_and_tip_x(loop, tentacle, particles)]
-        for _ in range(loaded.frame_count - 1):
-            loop.step_frame()
-            xs.append(_root_and_tip_x(loop, tentacle, particles))
-        x = np.array(xs)
-        time = np.arange(loaded.frame_count) / loaded.fps
-        traces.append(Trace(value, time, x[:, 0], x[:, 1]))
-    return traces
-
-
-def _own_particles(scene: Scene, tentacle: int) -> int:
+def own_particles(scene: Scene, tentacle: int) -> int:
     """The particles of simulated tentacle ``tentacle``, numbered across the scene's groups in
     order (as the result's T axis); raises :class:`InputError` listing the range (and each
     group's part of it) for one the scene does not have."""
@@ -97,14 +62,7 @@ def _own_particles(scene: Scene, tentacle: int) -> int:
     )
 
 
-def _root_and_tip_x(loop: Simulation, tentacle: int, particles: int) -> np.ndarray:
-    """x (m) of ``tentacle``'s root and tip (its own last particle, ``particles`` - 1: the rows
-    beyond are NaN padding) in the loop's current frame, (2,)."""
-    positions = loop.frame_values()[fields.TENTACLE_POSITION.path]
-    return np.array(positions[tentacle, [0, particles - 1], 0])
-
-
-def plot_sweep(traces: Sequence[Trace], key: str, path: Path, title: str = "") -> Path:
+def plot_sweep(traces: Sequence[Trace], path: Path, title: str = "") -> Path:
     """Paper Figs. 7-8 style: the root (red) and each tip against time, labelled by value."""
     import matplotlib
 
@@ -120,7 +78,7 @@ def plot_sweep(traces: Sequence[Trace], key: str, path: Path, title: str = "") -
         ax.text(
             0.01,
             0.88,
-            f"{key} = {trace.value:g}",
+            trace.label,
             transform=ax.transAxes,
             fontsize=9,
             va="top",
@@ -147,12 +105,24 @@ def plot_sweep(traces: Sequence[Trace], key: str, path: Path, title: str = "") -
     return path
 
 
-def write_traces_csv(traces: Sequence[Trace], key: str, path: Path) -> Path:
-    """Columns: key value, time (s), root x (m), tip x (m)."""
+def write_traces_csv(traces: Sequence[Trace], path: Path) -> Path:
+    """One row per point and frame. Columns: each swept key (its value), time (s), root x (m),
+    tip x (m)."""
+    keys = list(traces[0].point) if traces else []
     with open(path, "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
-        writer.writerow([key, "time_s", "root_x_m", "tip_x_m"])
+        writer.writerow([*keys, "time_s", "root_x_m", "tip_x_m"])
         for trace in traces:
+            values = [trace.point[key] for key in keys]
             for row in zip(trace.time, trace.root_x, trace.tip_x, strict=True):
-                writer.writerow([trace.value, *(f"{v:.9g}" for v in row)])
+                writer.writerow([*values, *(f"{v:.9g}" for v in row)])
     return path
+
+
+def format_value(value: Any) -> str:
+    """A swept value as a label shows it: numbers in ``g`` format, booleans in TOML's spelling."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, int | float):
+        return f"{value:g}"
+    return str(value)
