@@ -408,9 +408,25 @@ SIDECAR_BYTES_PER_ARRAY = 650
 
 def _sidecar_bytes(datasets: list[Dataset], frames: int) -> int:
     """``result.xdmf`` (:mod:`jellysim.io.xdmf`): a grid a frame for each part, naming the
-    per-frame arrays (all but those of one number a frame)."""
+    per-frame arrays (all but those of one number a frame), and the tentacles' connectivity
+    written out once (each particle's index, as text)."""
     arrays = sum(1 for spec in datasets if spec.frame_shape)
-    return frames * arrays * SIDECAR_BYTES_PER_ARRAY + 2048
+    particles = sum(
+        int(np.prod(spec.frame_shape[:2]))
+        for spec in datasets
+        if spec.path == fields.TENTACLE_POSITION.path
+    )
+    return frames * arrays * SIDECAR_BYTES_PER_ARRAY + _index_text_bytes(particles) + 2048
+
+
+def _index_text_bytes(count: int) -> int:
+    """The characters of ``0 1 2 ... count-1`` and a space after each."""
+    total, digits, low = 0, 1, 0
+    while low < count:
+        high = min(count, 10**digits)
+        total += (high - low) * (digits + 1)
+        low, digits = high, digits + 1
+    return total
 
 
 # ------------------------------------------------------------------------------------- memory
