@@ -86,7 +86,7 @@ def test_export_format_is_read_in_any_case(small: Path, tmp_path: Path) -> None:
     ("command", "shown"),
     [
         ("render", ["picture quality (default: draft)", "(default: 640x480)", "(default: 1)"]),
-        ("export", ["every K-th frame (default: 1)", "{vtk,usd,gltf,obj,ply}"]),
+        ("export", ["every K-th frame (default: 1)", "{vtk,usd,gltf,obj,ply,xdmf}"]),
         ("sweep", ["(default: out/sweeps)"]),
         ("view", ["(default: a free one)"]),
     ],

@@ -174,7 +174,7 @@ def test_resume_of_a_finished_run_changes_nothing(tmp_path: Path) -> None:
     quick = ["duration=0.5", "tentacles.count=2", "tentacles.particles=20"]
     assert _jellysim(tmp_path, quick).returncode == 0
     before = _fingerprint(tmp_path)
-    assert set(before) == {"result.h5", "scene.toml"}
+    assert set(before) == {"result.h5", "result.xdmf", "scene.toml"}
 
     done = _jellysim(tmp_path, quick, "--resume")
     assert done.returncode == 0, done.stderr

@@ -32,7 +32,10 @@ def read_all(path: Path) -> dict[str, np.ndarray]:
 
         def visit(name: str, item: object) -> None:
             if isinstance(item, h5py.Dataset):
-                values[f"data:{name}"] = np.asarray(item[()])
+                data = np.asarray(item[()])
+                if data.dtype == object:  # text (the xyz labels): stored as text, unpickled
+                    data = data.astype(str)
+                values[f"data:{name}"] = data
                 values[f"units:{name}"] = np.asarray(str(item.attrs.get("units", "")))
 
         f.visititems(visit)

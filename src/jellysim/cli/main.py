@@ -189,7 +189,9 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--quiet", action="store_true", help="no progress")
 
     export = sub.add_parser(
-        "export", help="files for other tools: vtk (ParaView), usd, gltf, obj, ply"
+        "export",
+        help="files for other tools: vtk (ParaView), usd, gltf, obj, ply; xdmf (the sidecar "
+        "through which ParaView and VisIt open result.h5, for a result written without one)",
     )
     export.add_argument("dir", help="folder holding result.h5")
     export.add_argument(
@@ -197,10 +199,12 @@ def _parser() -> argparse.ArgumentParser:
         required=True,
         dest="fmt",
         type=str.lower,
-        metavar="{vtk,usd,gltf,obj,ply}",
+        metavar="{vtk,usd,gltf,obj,ply,xdmf}",
         help="the file format (any case)",
     )
-    export.add_argument("--out", help="output folder (default: DIR/export/FORMAT)")
+    export.add_argument(
+        "--out", help="output folder (default: DIR/export/FORMAT; for xdmf, DIR itself)"
+    )
     export.add_argument("--frames", metavar="A:B", help="frames A to B-1 only")
     export.add_argument("--every", type=int, default=1, metavar="K", help="every K-th frame")
     export.add_argument(

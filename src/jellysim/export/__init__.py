@@ -52,12 +52,24 @@ def _gltf(result: Result, out: Path, frames: range, interpolation: int | None) -
     return export_gltf(result, out, frames, interpolation)
 
 
+def _xdmf(result: Result, out: Path, frames: range, interpolation: int | None) -> list[Path]:
+    from jellysim.io.xdmf import XDMF_FILE, write_xdmf
+
+    path = out / XDMF_FILE
+    try:
+        write_xdmf(result.file, result.path, path, frames)
+    except OSError as err:
+        raise InputError(f"cannot write '{path}' ({err.strerror or err})") from None
+    return [path]
+
+
 EXPORTERS: dict[str, Exporter] = {
     "vtk": _vtk,
     "obj": _obj,
     "ply": _ply,
     "usd": _usd,
     "gltf": _gltf,
+    "xdmf": _xdmf,
 }
 
 
@@ -70,8 +82,10 @@ def export(
     interpolation: int | None = None,
     up: str = "y",
 ) -> list[Path]:
-    """Export ``result`` as ``fmt`` into ``out`` (default ``DIR/export/<fmt>``); ``up``: the up
-    axis of an OBJ sequence ("y", the OBJ convention, or "z", jellysim's own)."""
+    """Export ``result`` as ``fmt`` into ``out`` (default ``DIR/export/<fmt>``; for ``xdmf``,
+    ``DIR`` itself: the sidecar ``result.xdmf`` that runs write beside ``result.h5``, for a
+    result written before them); ``up``: the up axis of an OBJ sequence ("y", the OBJ
+    convention, or "z", jellysim's own)."""
     if fmt not in EXPORTERS:
         raise InputError(f"--format {fmt}: unknown; expected one of {', '.join(EXPORTERS)}")
     if fmt == "obj" and up not in ("y", "z"):
@@ -84,7 +98,8 @@ def export(
     first, stop = (0, count) if frames is None else frames
     if not 0 <= first < stop <= count:
         raise InputError(f"--frames {first}:{stop}: the result has frames 0:{count}")
-    folder = output_folder(out if out is not None else result.folder / "export" / fmt)
+    default = result.folder if fmt == "xdmf" else result.folder / "export" / fmt
+    folder = output_folder(out if out is not None else default)
     if fmt == "obj":
         from jellysim.export.meshes import export_obj
 

@@ -10,6 +10,11 @@ dataset holds (:attr:`Result.frames`). Chunks carry Fletcher-32 checksums, so a 
 is an error, never silently wrong numbers. Disk full, a read-only folder, or ``result.h5``
 deleted or replaced while the run writes it stop the run with :class:`OutputError`, the frames
 already on disk kept (a deleted file is written back from the run's open copy).
+
+Every axis is named by an HDF5 dimension scale (netCDF-4's layout, written with the file:
+:func:`write_dimension_scales`), so xarray and netCDF tools read the file with the dimensions of
+:meth:`Result.to_xarray`; the XDMF sidecar ``result.xdmf`` beside it
+(:mod:`jellysim.io.xdmf`) lets ParaView and VisIt open it as a time series.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from jellysim import fields
 from jellysim.config.schema import DEFAULT_GROUP
 from jellysim.errors import InputError, OutputError
 from jellysim.fields import Dataset, Field
+from jellysim.io.xdmf import write_xdmf
 
 RESULT_FILE = "result.h5"
 
@@ -47,6 +53,10 @@ Frames = int | slice | Sequence[int]
 # The HDF5 format written: 1.8's, which every HDF5 reader of the last fifteen years opens and
 # which carries no "open for writing" flag that a killed writer would leave set.
 LIBVER = ("earliest", "v108")
+
+# The XDMF sidecar is rewritten at a flush only once this many times its last write's duration
+# has passed since that write.
+SIDECAR_PAUSE = 20.0
 
 # Room kept free on the output's file system beyond a batch's own bytes (HDF5's index, the
 # checkpoint): a batch that would not fit with this margin is not started.
@@ -79,6 +89,57 @@ def _dimension(field: Field, axis: str | int) -> str:
     if "S" in field.axes:
         return "end"
     return "xyz"
+
+
+def dimension_names(field: Field) -> tuple[str, ...]:
+    """The named dimensions of ``field``'s dataset: ``time`` first for a per-frame field, then
+    one per axis (:data:`DIMENSIONS`); the same in ``result.h5``'s dimension scales and in
+    :meth:`Result.to_xarray`."""
+    names = tuple(_dimension(field, axis) for axis in field.axes)
+    return ("time", *names) if field.per_frame else names
+
+
+# A kinematic bell's bell/position is an HDF5 hard link to bell/surface_vertices (one dataset,
+# DESIGN §3): it has the surface's dimensions.
+SHARED_DATASETS = {fields.BELL_POSITION.path: fields.BELL_SURFACE_VERTICES}
+
+# The netCDF-4 convention for a dimension without a coordinate variable: a dataset of the
+# dimension's length, no data stored, marked by this NAME (what netCDF-C writes; h5netcdf and
+# netCDF-C read such a dataset as a dimension only).
+NOT_A_VARIABLE = "This is a netCDF dimension but not a netCDF variable.%10d"
+
+
+def write_dimension_scales(f: h5py.File, paths: Sequence[str]) -> None:
+    """Name the axes of the datasets at ``paths`` with HDF5 dimension scales (the netCDF-4
+    layout), so xarray (h5netcdf) and netCDF tools read ``result.h5`` with named dimensions:
+    ``time`` (s) is the time axis's scale and coordinate, ``xyz`` a coordinate labelled "x",
+    "y", "z", every other dimension a root dataset of its length that stores no data. Written
+    when the file is created: a killed run's file has them."""
+    lengths: dict[str, int] = {}
+    attached: list[tuple[h5py.Dataset, tuple[str, ...]]] = []
+    for path in paths:
+        field = fields.BY_PATH[path]
+        ds = f[path]
+        names = dimension_names(field)
+        if field is not fields.TIME:
+            attached.append((ds, names))
+        ds.attrs["long_name"] = field.doc
+        for name, length in zip(names, ds.shape, strict=True):
+            if name != "time" and lengths.setdefault(name, length) != length:
+                raise ValueError(f"{path}: dimension {name} of {length}, elsewhere {lengths[name]}")
+    f[fields.TIME.path].make_scale("time")
+    for name, length in lengths.items():
+        if name == "xyz":
+            scale = f.create_dataset(
+                name, data=np.array(["x", "y", "z"], dtype=h5py.string_dtype())
+            )
+            scale.make_scale(name)
+        else:
+            scale = f.create_dataset(name, shape=(length,), dtype=np.float32)
+            scale.make_scale(NOT_A_VARIABLE % length)
+    for ds, names in attached:
+        for axis, name in enumerate(names):
+            ds.dims[axis].attach_scale(f[name])
 
 
 def frame_datasets(tentacles: int, particles: int, margin_points: int) -> list[Dataset]:
@@ -151,6 +212,10 @@ class ResultWriter:
     disk, which are the ones reported as written. A fault of the output (disk full, not
     writable, the file deleted or replaced) raises :class:`OutputError` from :meth:`flush`;
     the file then keeps the frames of the last good flush and is written no more.
+
+    Beside ``result.h5`` the writer keeps ``result.xdmf`` (:mod:`jellysim.io.xdmf`), the XDMF
+    description through which ParaView and VisIt open the result: written with the file, again
+    at flushes (see :meth:`_write_sidecar`) and on :meth:`close`, always whole.
     """
 
     def __init__(
@@ -195,6 +260,7 @@ class ResultWriter:
                 f[name].attrs["units"] = units
             for name, target in (links or {}).items():
                 f[name] = f[target]
+            write_dimension_scales(f, [spec.path for spec in datasets] + list(static or {}))
             for key, value in attributes.items():
                 f.attrs[key] = value
             f.flush()
@@ -208,6 +274,16 @@ class ResultWriter:
             temporary.unlink(missing_ok=True)
             raise
         self._file = f
+        self._sidecar = path.with_suffix(".xdmf")
+        self._sidecar_frames = -1  # the frames the sidecar on disk lists
+        self._sidecar_bytes = 0
+        self._sidecar_seconds = 0.0  # what its last write took
+        self._sidecar_at = 0.0
+        try:
+            self._write_sidecar()
+        except OutputError:
+            f.close()
+            raise
         self._descriptor = int(f.id.get_vfd_handle())
         self._datasets = {spec.path: self._file[spec.path] for spec in datasets}
         self._frame_bytes = sum(frame_bytes(spec) for spec in datasets)
@@ -227,6 +303,26 @@ class ResultWriter:
             or time.monotonic() - self._last_flush >= self._batch_seconds
         ):
             self.flush()
+
+    def _write_sidecar(self, force: bool = True) -> None:
+        """Write the XDMF sidecar (:mod:`jellysim.io.xdmf`) listing the frames flushed, whole
+        or not at all. Unless ``force``, skipped while less than :data:`SIDECAR_PAUSE` times its
+        last write's duration has passed since then, so rewriting a long run's sidecar takes at
+        most a twentieth of the run's time; :meth:`close` writes it last."""
+        if self._sidecar_frames == self.frames:
+            return
+        now = time.monotonic()
+        if not force and now - self._sidecar_at < SIDECAR_PAUSE * self._sidecar_seconds:
+            return
+        try:
+            self._sidecar_bytes = write_xdmf(
+                self._file, self.path, self._sidecar, range(self.frames)
+            )
+        except OSError as err:
+            raise self._fault(f"cannot write {self._sidecar.name} ({_os_reason(err)})") from None
+        self._sidecar_frames = self.frames
+        self._sidecar_at = time.monotonic()
+        self._sidecar_seconds = self._sidecar_at - now
 
     def _fault(self, what: str) -> OutputError:
         written = "no frame is" if self.frames == 0 else f"frames 0-{self.frames - 1} are"
@@ -248,7 +344,7 @@ class ResultWriter:
         if not pending:
             return
         free = shutil.disk_usage(self.path.parent).free
-        needed = pending * self._frame_bytes + FREE_SPACE_MARGIN
+        needed = pending * self._frame_bytes + self._sidecar_bytes + FREE_SPACE_MARGIN
         if free < needed:
             raise self._fault(
                 f"the disk is full ({free / 2**20:.1f} MiB free, the next {pending} frames "
@@ -312,6 +408,7 @@ class ResultWriter:
                 self._broken = True
                 raise self._fault(f"cannot write the next frames ({_os_reason(err)})") from None
             self.frames = start + pending
+            self._write_sidecar(force=False)
         self._last_flush = time.monotonic()
 
     def close(self, discard: bool = False) -> None:
@@ -327,6 +424,8 @@ class ResultWriter:
                 buffer.clear()
         try:
             self.flush()
+            if not discard:  # after a fault the sidecar stays as its last write left it
+                self._write_sidecar()
         finally:
             if self._file.id.valid and not self._broken:
                 self._file.close()
@@ -608,8 +707,7 @@ class Result:
             if field is fields.TIME or not self.has(field):
                 continue
             data = self.read(field, chosen) if field.per_frame else self.read(field)
-            names = tuple(_dimension(field, axis) for axis in field.axes)
-            dims = ("time", *names) if field.per_frame else names
+            dims = dimension_names(self._owner(field))
             described = {"units": field.units, "long_name": field.doc}
             variables[field.path.replace("/", "_")] = xarray.Variable(dims, data, described)
         time = self.read(fields.TIME, chosen)
@@ -624,6 +722,18 @@ class Result:
             "tentacle_groups": ", ".join(self.tentacle_groups),
         }
         return xarray.Dataset(variables, coords=coords, attrs=attrs)
+
+    def _owner(self, field: Field) -> Field:
+        """The field whose dataset ``field``'s is: its own, or the one it is a hard link to
+        (:data:`SHARED_DATASETS`)."""
+        target = SHARED_DATASETS.get(field.path)
+        if (
+            target is not None
+            and self.has(target)
+            and self.file[field.path] == self.file[target.path]
+        ):
+            return target
+        return field
 
     def group_number(self, group: str | int) -> int:
         """The index of ``group`` (its name, or its index) in :attr:`tentacle_groups`; raises
