@@ -1,8 +1,10 @@
 """The exported ``import_into_blender.py`` run for real in Blender as a Python module (bpy 5.0.1
 from PyPI, in its own venv ``.venv-blender`` that ``make blender`` makes, so that its numpy pin
-stays out of jellysim's): it clears the start-up scene, imports the stage, follows the jellyfish
-with the camera of ``jellysim render --camera follow``, renders small frames in Cycles on the CPU
-and saves a .blend, read back here; and every failure is one line and exit status 2.
+stays out of jellysim's): it clears the start-up scene, imports the USD stage or the glTF part,
+follows the jellyfish with the camera of ``jellysim render --camera follow``, renders small frames
+in Cycles on the CPU and saves a .blend, read back here (for glTF: the result's frame range and
+fps, and every frame's geometry, evaluated by Blender, the result's); and every failure is one
+line and exit status 2.
 
 bpy 5.0.1 is built for CPython 3.11 only: the test skips only where no Python 3.11 is there to
 install it for."""
@@ -21,7 +23,9 @@ import numpy as np
 import pytest
 
 import jellysim
+from jellysim import fields
 from jellysim.export import export
+from jellysim.export.groups import export_groups
 from jellysim.render.pipeline import VIEW_DIRECTION, frame_cameras, make_members, scene_look
 
 pxr = pytest.importorskip("pxr", reason="usd-core is a test dependency (pip install -e .[test])")
@@ -210,7 +214,7 @@ def test_blender_s_argument_style_renders_one_frame(exported, tmp_path: Path) ->
         (["missing.usdc"], "no USD stage at"),
         (["STAGE", "--size", "10"], "--size: '10': expected WxH"),
         (["STAGE", "--render", "out.jpg"], "expected a path ending in .png"),
-        (["STAGE", "--render", "out.png", "--frames", "7:9"], "the stage has frames 0 to 4"),
+        (["STAGE", "--render", "out.png", "--frames", "7:9"], "the file has frames 0 to 4"),
         (["STAGE", "--save", "x.txt"], "expected a path ending in .blend"),
         (["STAGE", "--colour", "red"], "unrecognized arguments: --colour red"),
         (["GARBAGE"], "File too small"),
@@ -245,3 +249,168 @@ def test_a_blender_without_usd_is_told_which_builds_read_it(exported, tmp_path: 
         "and Ubuntu's blender packages are): use an official build from blender.org, or the bpy "
         "module (pip install bpy)"
     )
+
+
+# The glTF route: a part of a result at a frame rate Blender stores as fps / fps_base (12.5 =
+# 12 / 0.96), which its glTF importer misreads (it keys time x fps x fps_base).
+
+# Reads a saved .blend back, in the bpy venv: frames, fps, objects, materials, shape keys, the
+# keyframes' frames, the camera's location, and every mesh's evaluated world vertices at every
+# frame of the range (argv[2], a .npz).
+READ_GLTF_BLEND = """
+import json, sys
+import bpy
+import numpy as np
+bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
+scene = bpy.context.scene
+meshes = [o for o in scene.objects if o.type == "MESH"]
+facts = {
+    "objects": sorted(o.name for o in scene.objects),
+    "frames": [scene.frame_start, scene.frame_end, scene.frame_step],
+    "fps": scene.render.fps / scene.render.fps_base,
+    "materials": {o.name: [m.name for m in o.data.materials] for o in meshes},
+    "shape_keys": {o.name: len(o.data.shape_keys.key_blocks) for o in meshes},
+    "keys": sorted({k.co[0] for a in bpy.data.actions for layer in a.layers
+                    for strip in layer.strips for bag in strip.channelbags
+                    for curve in bag.fcurves for k in curve.keyframe_points}),
+    "camera": {},
+}
+positions = {}
+for frame in range(scene.frame_start, scene.frame_end + 1):
+    scene.frame_set(frame)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    facts["camera"][frame] = list(scene.camera.matrix_world.translation)
+    for obj in meshes:
+        evaluated = obj.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        co = np.empty(3 * len(mesh.vertices))
+        mesh.vertices.foreach_get("co", co)
+        world = np.asarray(evaluated.matrix_world)
+        positions[f"{obj.name}/{frame}"] = co.reshape(-1, 3) @ world[:3, :3].T + world[:3, 3]
+        evaluated.to_mesh_clear()
+np.savez(sys.argv[2], **positions)
+print("FACTS " + json.dumps(facts))
+"""
+
+
+@pytest.fixture(scope="module")
+def gltf_exported(tmp_path_factory: pytest.TempPathFactory):
+    """brown-jelly, 6 frames at 12.5 fps, exported to glTF (a part, the index, the script)."""
+    folder = tmp_path_factory.mktemp("blender-gltf")
+    overrides = {"duration": 0.4, "fps": 12.5, "tentacles.particles": 20}
+    result = jellysim.run(jellysim.load_scene("brown-jelly", overrides), folder / "run")
+    part, _, script = export(result, "gltf", folder / "gltf")
+    return result, part, script, folder
+
+
+@pytest.fixture(scope="module")
+def gltf_rendered(gltf_exported):
+    """The exported script run as ``python import_into_blender.py PART --render ... --frames
+    2:3 --save ...``; the .blend read back: its facts and every mesh's vertices at every
+    frame."""
+    result, part, script, folder = gltf_exported
+    _bpy_python()
+    out, blend = folder / "render" / "jelly.png", folder / "render" / "jelly.blend"
+    size = f"{SIZE[0]}x{SIZE[1]}"
+    run = _blender(
+        script, part, "--render", out, "--frames", "2:3", "--size", size, "--samples", "8",
+        "--save", blend,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "rendered frame 2" in run.stderr
+    positions = folder / "positions.npz"
+    read = _blender("-c", READ_GLTF_BLEND, blend, positions)
+    assert read.returncode == 0, read.stderr
+    line = next(t for t in read.stdout.splitlines() if t.startswith("FACTS "))
+    return result, json.loads(line.removeprefix("FACTS ")), dict(np.load(positions)), out
+
+
+def test_gltf_the_start_up_scene_is_replaced_by_the_part(gltf_rendered) -> None:
+    result, facts, _, _ = gltf_rendered
+    assert facts["objects"] == [
+        "bell",
+        "brown-jelly",  # the glTF root node
+        "jellysim camera",
+        "jellysim fill",
+        "jellysim key",
+        "tentacles_marginal",
+        "tentacles_oral_arms",
+    ]  # no start-up cube, light or camera; one object per part of the jellyfish
+    assert facts["materials"] == {
+        "bell": ["jellysim Bell"],
+        "tentacles_marginal": ["jellysim Tentacles_marginal"],
+        "tentacles_oral_arms": ["jellysim Tentacles_oral_arms"],
+    }
+    # A shape key per frame: the basis (frame 0) and one per later frame.
+    assert set(facts["shape_keys"].values()) == {result.frames}
+
+
+def test_gltf_frame_range_fps_and_keys_are_the_result_s(gltf_rendered) -> None:
+    result, facts, _, _ = gltf_rendered
+    assert result.frames == 6 and float(result.file.attrs["fps"]) == 12.5
+    assert facts["frames"] == [0, result.frames - 1, 1]
+    assert facts["fps"] == pytest.approx(12.5, rel=1e-6)
+    # Keyframes on the frame numbers exactly (and the last frame's hold one frame on).
+    assert facts["keys"] == [float(f) for f in range(result.frames + 1)]
+
+
+def test_gltf_every_frame_shows_that_frame_s_geometry(gltf_rendered) -> None:
+    """Blender's evaluated meshes at each frame against result.h5: the bell's vertices, and the
+    tip of every drawn marginal tentacle at the centre of its tube's tip cap (float32)."""
+    result, _, positions, _ = gltf_rendered
+    (marginal, _) = export_groups(result, scene_look(result.scene), None)
+    for frame in range(result.frames):
+        bell = result.read(fields.BELL_SURFACE_VERTICES, frame)
+        np.testing.assert_allclose(positions[f"bell/{frame}"], bell, atol=1e-6)
+        if frame:  # the bell moves between frames: a frame off would show
+            earlier = result.read(fields.BELL_SURFACE_VERTICES, frame - 1)
+            assert np.abs(bell - earlier).max() > 1e-3
+        tips = marginal.positions[frame][:, -1]  # (drawn tentacles, 3) m
+        tube = positions[f"tentacles_marginal/{frame}"]
+        nearest = np.linalg.norm(tube[None] - tips[:, None], axis=-1).min(axis=1)
+        assert nearest.max() < 1e-6
+
+
+def test_gltf_camera_follows_as_for_usd(gltf_rendered) -> None:
+    result, facts, _, _ = gltf_rendered
+    members = make_members([result], 1, None, 0, fluid=False)
+    cameras, _, _ = frame_cameras(members, result.frames, SIZE, "follow")
+    for frame, camera in enumerate(cameras):
+        np.testing.assert_allclose(facts["camera"][str(frame)], camera.location, atol=2e-6)
+
+
+def test_gltf_rendered_frame_shows_the_jellyfish(gltf_rendered) -> None:
+    result, _, _, out = gltf_rendered
+    look = scene_look(result.scene)
+    image = _pixels(out)
+    assert image.shape == (SIZE[1], SIZE[0], 3)
+    assert image.std() > 0.08  # not a flat picture
+    for corner in (image[:6, :6], image[:6, -6:]):
+        np.testing.assert_allclose(corner.mean(axis=(0, 1)), _srgb(look.water_color), atol=0.06)
+    warm = image[..., 0] > image[..., 2] + 0.15
+    assert warm.mean() > 0.08  # the bell's hue over about a tenth of the picture
+    rows, columns = np.nonzero(warm)
+    assert rows.max() - rows.min() > 0.5 * SIZE[1]
+    assert abs(columns.mean() - SIZE[0] / 2) < 0.1 * SIZE[0]
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("missing.glb", None, "no glTF file at"),
+        ("plain.gltf", '{"asset": {"version": "2.0"}, "scenes": [{}]}', "no jellysim settings"),
+        ("garbage.glb", "not glTF", "is not a glTF file"),
+    ],
+)
+def test_gltf_failures_are_one_line_and_status_2(
+    gltf_exported, tmp_path: Path, name, content, message
+) -> None:
+    _, _, script, _ = gltf_exported
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content, encoding="utf-8")
+    run = _blender(script, path, "--render", tmp_path / "x.png")
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2
+    assert len(lines) == 1 and lines[0].startswith("import_into_blender.py: error: "), lines
+    assert message in lines[0]

@@ -87,6 +87,11 @@ NOT_RUN = {
     "out/brown-jelly/export/usd/brown-jelly.usdc --render out/brown-jelly/blender/jelly.png "
     "--frames 0:50 --size 640x480": "needs the bpy module, in its own venv (.venv-blender), not "
     "this one; tests/integration/test_blender_import.py runs it so, on a tiny result",
+    "blender --background --python out/brown-jelly/export/gltf/import_into_blender.py -- "
+    "out/brown-jelly/export/gltf/brown-jelly_part000.glb --render out/brown-jelly/blender/gltf.png "
+    "--save out/brown-jelly/blender/gltf.blend": "needs Blender, which CI does not install; "
+    "tests/integration/test_blender_import.py runs the glTF export's script with bpy "
+    "(.venv-blender) with these options, and the export that writes it is run here",
     "python3.11 -m venv /work/venv-bench": "docs/performance.md's record of how the benchmark's "
     "environment was made (PyElastica from PyPI), not a jellysim command",
     '/work/venv-bench/bin/python -m pip install -e ".[bench]"': "the same record: it downloads "

@@ -8,6 +8,7 @@ skipped without them, except where the environment variable CI is set (CI instal
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import shutil
@@ -23,6 +24,7 @@ import jellysim
 from jellysim import fields
 from jellysim.export import export
 from jellysim.export import gltf as gltf_export
+from jellysim.export.blender_settings import camera_path
 from jellysim.interpolation import interpolate_result
 from jellysim.render.frame import tentacle_radii
 from jellysim.render.materials import GLOW_EMISSION
@@ -175,8 +177,9 @@ def signed_volume(points: np.ndarray, triangles: np.ndarray) -> float:
 
 
 def test_bell_and_tentacles_match_the_result(brown: jellysim.Result, exported: list[Path]) -> None:
-    part, index = exported
+    part, index, script = exported
     assert part.name == "brown-jelly_part000.glb" and index.name == "brown-jelly.gltf-parts.json"
+    assert script.name == "import_into_blender.py"
     glb = Glb(part)
     assert glb.doc.asset.version == "2.0"
     assert glb.doc.asset.generator == gltf_export.generator()
@@ -286,13 +289,88 @@ def test_animation_morphs_to_one_frame_at_a_time(
     # The animation spans the result: first frame's time to one interval after the last.
     assert times[0] == 0.0 and times[-1] == pytest.approx(brown.frames / fps)
     assert glb.doc.asset.extras["fps"] == fps
-    scene_extras = glb.doc.scenes[0].extras
+    scene_extras = dict(glb.doc.scenes[0].extras)
+    settings = scene_extras.pop("jellysim")  # the Blender script's: test_the_blender_script_...
     assert scene_extras == {
         "fps": fps,
         "frame_start": 0,
         "frame_end": brown.frames - 1,
         "frame_step": 1,
     }
+    assert (settings["first_frame"], settings["last_frame"], settings["fps"]) == (
+        0,
+        brown.frames - 1,
+        fps,
+    )
+
+
+def _load_script(path: Path):
+    spec = importlib.util.spec_from_file_location("import_into_blender", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_blender_script_reads_a_part_s_settings(
+    brown: jellysim.Result, exported: list[Path]
+) -> None:
+    """The exported import_into_blender.py's logic on the part, without Blender (which
+    tests/integration/test_blender_import.py runs it in): the settings read from the part's
+    scene extras, the frame numbers its keyframes go to, the objects its materials go to."""
+    part, _, script_path = exported
+    assert script_path.name == "import_into_blender.py"
+    script = _load_script(script_path)
+    settings = script.read_gltf_settings(part)
+    assert settings == script.settings_from_metadata(script.EMBEDDED_SETTINGS)  # the first part
+    assert script.stage_path(None, script_path) == part.resolve()
+    assert script.load_settings(part) == settings and script.is_gltf(part)
+    fps = float(brown.file.attrs["fps"])
+    assert (settings["first_frame"], settings["last_frame"], settings["frame_step"]) == (
+        0,
+        brown.frames - 1,
+        1,
+    )
+    assert settings["fps"] == fps and settings["stage_file"] == part.name
+    assert settings["camera_origin"] == camera_path(brown, 2)["camera_origin"]
+    # The bounds hold every vertex of every frame (z up).
+    glb = Glb(part)
+    low, high = np.array(settings["bounds_min"]), np.array(settings["bounds_max"])
+    for name in glb.names():
+        for frame in glb.frames():
+            points = z_up(glb.at(name, frame))
+            assert np.all(points >= low - 1e-6) and np.all(points <= high + 1e-6)
+    # Blender's importer keys time t at t x its scene's rate: back to the frame numbers, from
+    # the file's float32 times, whatever rate it imported at.
+    node_index, _ = glb.object("bell")
+    times, _ = glb.keyframes(node_index, "weights")
+    for rate in (10.0, 24.0, 12.0 * (12.0 / 12.5)):
+        keys = [float(t) * rate for t in times]
+        assert script.keyframe_frames(keys, fps, rate) == list(range(brown.frames + 1))
+    prims = list(script.material_parameters(settings))
+    assert script.part_object_prim("bell", prims) == "Bell"
+    assert script.part_object_prim("tentacles.001", prims) == "Tentacles"
+    assert script.part_object_prim("brown-jelly", prims) is None  # the root node
+    assert script.part_object_prim("tentacles_oral-arms", ["Tentacles", "Tentacles_oral_arms"]) == (
+        "Tentacles_oral_arms"
+    )
+    with pytest.raises(script.ScriptError, match="no glTF file at"):
+        script.stage_path(part.with_name("missing.glb"), script_path)
+
+
+def test_the_blender_script_refuses_a_glb_without_settings(tmp_path: Path, exported) -> None:
+    script = _load_script(exported[2])
+    plain = tmp_path / "plain.gltf"
+    plain.write_text(json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": []}]}))
+    with pytest.raises(script.ScriptError, match="carries no jellysim settings"):
+        script.read_gltf_settings(plain)
+    garbage = tmp_path / "garbage.glb"
+    garbage.write_bytes(b"glTF\x02\0\0\0\x20\0\0\0\x04\0\0\0BIN\0")
+    with pytest.raises(script.ScriptError, match="no JSON chunk"):
+        script.read_gltf_settings(garbage)
+    garbage.write_bytes(b"not glTF at all")
+    with pytest.raises(script.ScriptError, match="is not a glTF file"):
+        script.read_gltf_settings(garbage)
 
 
 def test_exported_files_pass_the_khronos_validator(exported: list[Path]) -> None:
@@ -354,7 +432,11 @@ def test_frames_every_and_interpolation_on_the_command_line(
         timeout=300,
     )
     printed = [Path(line) for line in done.stdout.split()]
-    assert printed == [out / "brown-jelly_part000.glb", out / "brown-jelly.gltf-parts.json"]
+    assert printed == [
+        out / "brown-jelly_part000.glb",
+        out / "brown-jelly.gltf-parts.json",
+        out / "import_into_blender.py",
+    ]
     glb = Glb(printed[0])
     assert glb.frames() == [1, 3]
     node_index, tubes = glb.object("tentacles")
@@ -416,7 +498,8 @@ def test_a_tiny_budget_splits_into_parts_holding_every_frame_once(
     monkeypatch.setattr(gltf_export, "PART_BUDGET_BYTES", budget)
     out = tmp_path / "split"
     paths = export(brown, "gltf", out, frames=(0, brown.frames), interpolation=1)
-    *parts, index_path = paths
+    *parts, index_path, script = paths
+    assert script.name == "import_into_blender.py"
     assert len(parts) >= 2
     assert [p.name for p in parts] == [f"brown-jelly_part{k:03d}.glb" for k in range(len(parts))]
     index = json.loads(index_path.read_text())
@@ -503,7 +586,7 @@ def test_a_part_holds_at_most_morph_frames_max_frames(
     brown: jellysim.Result, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(gltf_export, "MORPH_FRAMES_MAX", 2)
-    *parts, index_path = export(brown, "gltf", tmp_path, interpolation=1)
+    *parts, index_path, _ = export(brown, "gltf", tmp_path, interpolation=1)
     frames = [Glb(part).frames() for part in parts]
     assert frames == [[0, 1], [2, 3], [4]]
     index = json.loads(index_path.read_text())

@@ -57,7 +57,7 @@ def test_the_result_is_padded_and_the_groups_are_not(purple: jellysim.Result) ->
 def test_gltf_has_a_primitive_and_material_per_group(
     purple: jellysim.Result, tmp_path: Path
 ) -> None:
-    *parts, _ = export(purple, "gltf", tmp_path)
+    *parts, _, _ = export(purple, "gltf", tmp_path)  # the index and the Blender script
     assert_valid(parts)
     glb = Glb(parts[0])
     materials = {m.name: m for m in glb.doc.materials}

@@ -184,7 +184,8 @@ def test_the_script_is_python_that_imports_bpy_only_inside_functions(blender_exp
             top_level |= {alias.name.split(".")[0] for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
             top_level.add(str(node.module).split(".")[0])
-    assert top_level <= {"__future__", "argparse", "math", "sys", "pathlib", "typing"}  # no bpy
+    standard = {"__future__", "argparse", "json", "math", "struct", "sys", "pathlib", "typing"}
+    assert top_level <= standard  # no bpy
     inside = {
         function.name
         for function in ast.walk(tree)

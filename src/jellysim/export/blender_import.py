@@ -1,44 +1,54 @@
-"""Import a jellysim USD stage into Blender, ready to render.
+"""Import a jellysim USD stage or glTF part into Blender, ready to render.
 
-``jellysim export DIR --format usd`` writes this script as ``import_into_blender.py`` next to the
-stage. Run it in a Blender that reads USD: the official builds from blender.org, or the ``bpy``
-module from PyPI (``pip install bpy``, Blender as a Python module). Debian's and Ubuntu's own
-``blender`` packages are built without USD; there the script says so and exits with status 2::
+``jellysim export DIR --format usd`` and ``--format gltf`` write this script as
+``import_into_blender.py`` next to the stage or the glTF parts. It imports a USD stage (a path
+ending in anything but ``.glb`` or ``.gltf``) in a Blender that reads USD: the official builds
+from blender.org, or the ``bpy`` module from PyPI (``pip install bpy``, Blender as a Python
+module); Debian's and Ubuntu's own ``blender`` packages are built without USD, and there the
+script says so and exits with status 2. A glTF part (``.glb``, ``.gltf``) imports in any Blender
+with its bundled glTF 2.0 add-on::
 
-    blender --background --python import_into_blender.py -- STAGE.usdc \\
+    blender --background --python import_into_blender.py -- FILE \\
         [--render OUT.png] [--frames A:B] [--size WxH] [--samples N] [--save FILE.blend]
-    python import_into_blender.py STAGE.usdc [same options]      # a Python with bpy
+    python import_into_blender.py FILE [same options]      # a Python with bpy
 
-(without ``--background`` Blender opens with the stage set up), or open it in Blender's text
-editor and press Run Script (it imports the stage next to it). In an unsaved file (the start-up
-scene) it first removes every object (the default cube, light and camera); a saved file's
-objects are kept. It imports the stage (``bpy.ops.wm.usd_import``), gives the bell a translucent
-glowing material and the tentacles and fluid theirs in the scene's ``[look]`` colours (each
-tentacle group of a scene of several in its own colour), colours the world as the water, adds a
-camera that follows the jellyfish as ``jellysim render --camera follow`` does, a key light and a
-fill light that moves with the camera, sets the frame range, frame step, fps and resolution from
-the stage and Cycles as the render engine; then ``--save`` saves the .blend and ``--render``
-renders frames to PNG (the first exported frame, or those of ``--frames`` A to B-1: one frame to
-OUT.png itself, several to OUT_NNNNN.png). Any failure is one line on stderr and exit status 2.
+(FILE: ``STAGE.usdc`` or ``NAME_partNNN.glb``; without ``--background`` Blender opens with the
+file set up), or open it in Blender's text editor and press Run Script (it imports the file it
+was exported with, next to it: the stage, or the first glTF part). In an unsaved file (the
+start-up scene) it first removes every object (the default cube, light and camera); a saved
+file's objects are kept. It imports the file (``bpy.ops.wm.usd_import``, or
+``bpy.ops.import_scene.gltf`` with the file's fps as the scene's, its keyframes then put on the
+exported frame numbers), gives the bell a translucent glowing material and the tentacles and
+fluid theirs in the scene's ``[look]`` colours (each tentacle group of a scene of several in
+its own colour), colours the world as the water, adds a camera that follows the jellyfish as
+``jellysim render --camera follow`` does, a key light and a fill light that moves with the
+camera, sets the frame range, frame step, fps and resolution from the file and Cycles as the
+render engine; then ``--save`` saves the .blend and ``--render`` renders frames to PNG (the
+first exported frame, or those of ``--frames`` A to B-1: one frame to OUT.png itself, several to
+OUT_NNNNN.png). Any failure is one line on stderr and exit status 2.
 
-What it needs of the stage (colours, frame range, bounds, the renderers' camera direction, field
+What it needs of the file (colours, frame range, bounds, the renderers' camera direction, field
 of view and path) the exporter writes into the stage's layer metadata (``customLayerData``, key
-``jellysim``) and, for a Blender whose Python lacks USD's ``pxr`` module (the ``bpy`` module),
-into ``EMBEDDED_SETTINGS`` below. Everything but :func:`run` and its helpers is plain Python on
-plain values; ``bpy`` and ``pxr`` are imported only inside the functions that need them, so the
-file imports (and is tested) without Blender. It imports nothing of jellysim.
+``jellysim``) or the glTF scene's ``extras`` (key ``jellysim``) and, for a Blender whose Python
+lacks USD's ``pxr`` module (the ``bpy`` module), into ``EMBEDDED_SETTINGS`` below. Everything but
+:func:`run` and its helpers is plain Python on plain values; ``bpy`` and ``pxr`` are imported
+only inside the functions that need them, so the file imports (and is tested) without Blender.
+It imports nothing of jellysim.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import struct
 import sys
 from pathlib import Path
 from typing import Any
 
 SCRIPT = "import_into_blender.py"
-METADATA_KEY = "jellysim"  # the stage layer's customLayerData key
+METADATA_KEY = "jellysim"  # the stage layer's customLayerData key, the glTF scene's extras key
+GLTF_SUFFIXES = (".glb", ".gltf")  # a glTF file; any other path is a USD stage
 RESOLUTION = (1920, 1080)  # pixels
 SAMPLES = 64  # Cycles samples a pixel (denoised)
 FRAMING_MARGIN = 1.08  # as jellysim render: this much beyond the nearest distance that fits
@@ -66,14 +76,20 @@ class ScriptError(Exception):
     without USD)."""
 
 
+def is_gltf(path: str | Path) -> bool:
+    """Whether ``path`` names a glTF file (``.glb``, ``.gltf``) rather than a USD stage."""
+    return Path(path).suffix.lower() in GLTF_SUFFIXES
+
+
 def settings_from_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
-    """The stage's ``customLayerData['jellysim']`` as plain Python values (lists of floats for
-    vectors and colours); raises ScriptError naming a missing key."""
+    """The stage's ``customLayerData['jellysim']`` (or the glTF scene's ``extras['jellysim']``)
+    as plain Python values (lists of floats for vectors and colours); raises ScriptError naming
+    a missing key."""
     settings: dict[str, Any] = {}
     for key in (*VECTORS, *COLORS, *NUMBERS, *INTEGERS, "stage_file"):
         if key not in metadata:
             raise ScriptError(
-                f"the stage's jellysim metadata lacks '{key}' (export it again with this jellysim)"
+                f"the file's jellysim settings lack '{key}' (export it again with this jellysim)"
             )
     for key in (*VECTORS, *COLORS):
         settings[key] = [float(v) for v in metadata[key]]
@@ -86,7 +102,7 @@ def settings_from_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
     prims = [str(name) for name in metadata.get("group_prims", ())]
     colors = [float(v) for v in metadata.get("group_colors", ())]
     if len(colors) != 3 * len(prims):
-        raise ScriptError("the stage's jellysim metadata has group_colors unlike its group_prims")
+        raise ScriptError("the file's jellysim settings have group_colors unlike group_prims")
     settings["group_colors"] = {name: colors[3 * k : 3 * k + 3] for k, name in enumerate(prims)}
     return settings
 
@@ -105,9 +121,35 @@ def read_stage_settings(stage_path: str | Path) -> dict[str, Any]:
     return settings_from_metadata(dict(metadata))
 
 
+def read_gltf_settings(path: str | Path) -> dict[str, Any]:
+    """Settings read from a glTF file's scene ``extras['jellysim']`` (plain JSON: a ``.glb``'s
+    JSON chunk, which comes first, or a ``.gltf``); raises ScriptError for a file that is not
+    glTF or carries no jellysim settings."""
+    with open(path, "rb") as stream:
+        head = stream.read(20)
+        if head[:4] == b"glTF":  # GLB: header (magic, version, length), then the JSON chunk
+            if len(head) < 20 or head[16:20] != b"JSON":
+                raise ScriptError(f"'{path}' is not a binary glTF file (no JSON chunk)")
+            (length,) = struct.unpack("<I", head[12:16])
+            text = stream.read(length)
+        else:
+            text = head + stream.read()
+    try:
+        document = json.loads(text)
+        scene = document["scenes"][document.get("scene", 0)]
+        metadata = scene.get("extras", {}).get(METADATA_KEY)
+    except (ValueError, UnicodeDecodeError, KeyError, IndexError, TypeError, AttributeError):
+        raise ScriptError(f"'{path}' is not a glTF file with a scene") from None
+    if not isinstance(metadata, dict):
+        raise ScriptError(f"'{path}' carries no jellysim settings (export it again)")
+    return settings_from_metadata(metadata)
+
+
 def load_settings(stage_path: str | Path) -> dict[str, Any]:
-    """The stage's settings: from the stage where ``pxr`` imports, else the copy embedded when
-    the stage is the one this script was exported with."""
+    """The file's settings: a glTF file's own; a stage's where ``pxr`` imports, else the copy
+    embedded when the stage is the one this script was exported with."""
+    if is_gltf(stage_path):
+        return read_gltf_settings(stage_path)
     try:
         return read_stage_settings(stage_path)
     except ImportError:
@@ -176,14 +218,15 @@ def parse_arguments(args: list[str]) -> argparse.Namespace:
     """The script's options (raises ScriptError with one line on a bad one)."""
     parser = _Parser(
         prog=SCRIPT,
-        description="Import a jellysim USD stage into Blender, ready to render.",
+        description="Import a jellysim USD stage or glTF part into Blender, ready to render.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument(
         "stage",
         nargs="?",
         type=Path,
-        help="the USD stage (default: the one this script was exported with, beside it)",
+        help="the USD stage or glTF part, .glb or .gltf (default: the file this script was "
+        "exported with, beside it)",
     )
     parser.add_argument("--render", type=Path, metavar="OUT.png", help="render frames to PNG")
     parser.add_argument(
@@ -206,14 +249,14 @@ def parse_arguments(args: list[str]) -> argparse.Namespace:
 
 
 def stage_path(stage: Path | None, script: str | Path) -> Path:
-    """The stage to import: ``stage``, else the stage this script was exported with, next to
-    the script; raises ScriptError when there is none."""
+    """The file to import: ``stage``, else the file this script was exported with (the stage,
+    or the first glTF part), next to the script; raises ScriptError when there is none."""
     if stage is None:
         if EMBEDDED_SETTINGS is None:
-            raise ScriptError(f"name the stage: blender --python {SCRIPT} -- STAGE.usdc")
+            raise ScriptError(f"name the file: blender --python {SCRIPT} -- STAGE.usdc")
         stage = Path(script).resolve().parent / str(EMBEDDED_SETTINGS["stage_file"])
     if not stage.is_file():
-        raise ScriptError(f"no USD stage at '{stage}'")
+        raise ScriptError(f"no {'glTF file' if is_gltf(stage) else 'USD stage'} at '{stage}'")
     return stage.resolve()
 
 
@@ -227,7 +270,7 @@ def frames_to_render(settings: dict[str, Any], frames: tuple[int, int] | None) -
     chosen = [f for f in range(*frames) if f in exported]
     if not chosen:
         raise ScriptError(
-            f"--frames {frames[0]}:{frames[1]}: the stage has frames {first} to {last}"
+            f"--frames {frames[0]}:{frames[1]}: the file has frames {first} to {last}"
             + (f" every {step}" if step > 1 else "")
         )
     return chosen
@@ -478,12 +521,75 @@ def _import_stage(bpy: Any, stage: Path) -> list[Any]:
     return imported
 
 
+def keyframe_frames(keys: list[float], fps: float, import_fps: float) -> list[float]:
+    """Blender frames of keyframes that Blender's glTF importer placed at ``keys`` (frames at
+    ``import_fps``, time x frame rate): time x ``fps``, rounded to the frame number it stands for
+    (the file's times are frame / fps in float32)."""
+    return [float(round(key * fps / import_fps)) for key in keys]
+
+
+def part_object_prim(object_name: str, prims: list[str]) -> str | None:
+    """The prim name (``Bell``, ``Tentacles_NAME``, ``Fluid``) among ``prims`` that an imported
+    object stands for: the USD prim's (``Bell``, ``Bell.001``) or the glTF node's (``bell``,
+    ``tentacles_oral-arms``), case and ``-`` aside; the longest match, so a group's
+    ``Tentacles_arms`` before ``Tentacles``."""
+    name = object_name.replace("-", "_").lower()
+    for prim in sorted(prims, key=len, reverse=True):
+        if name.startswith(prim.lower()):
+            return prim
+    return None
+
+
+def _retime_gltf_keys(actions: list[Any], fps: float, import_fps: float) -> None:
+    """Put the keyframes of the actions the glTF import made on the exported frame numbers
+    (:func:`keyframe_frames`), their handles moved with them."""
+    for action in actions:
+        for curve in _fcurves(action):
+            points = curve.keyframe_points
+            co, left, right = ([0.0] * (2 * len(points)) for _ in range(3))
+            points.foreach_get("co", co)
+            points.foreach_get("handle_left", left)
+            points.foreach_get("handle_right", right)
+            frames = keyframe_frames(co[0::2], fps, import_fps)
+            shift = [f - x for f, x in zip(frames, co[0::2], strict=True)]
+            co[0::2] = frames
+            left[0::2] = [x + d for x, d in zip(left[0::2], shift, strict=True)]
+            right[0::2] = [x + d for x, d in zip(right[0::2], shift, strict=True)]
+            points.foreach_set("co", co)
+            points.foreach_set("handle_left", left)
+            points.foreach_set("handle_right", right)
+            curve.update()
+
+
+def _import_gltf(bpy: Any, path: Path, settings: dict[str, Any]) -> list[Any]:
+    """The objects the glTF part's import adds to the scene, its animation on the exported
+    frame numbers: Blender's importer keys a time t at frame t x the scene's frame rate
+    (``render.fps * render.fps_base`` in its code), so the scene plays at the part's fps (whole,
+    ``fps_base`` 1) while it imports, and the keys are then retimed exactly."""
+    if not hasattr(bpy.ops.import_scene, "gltf"):
+        raise ScriptError("this Blender has no glTF importer: enable the glTF 2.0 add-on")
+    scene = bpy.context.scene
+    frame = render_settings(settings)
+    scene.frame_start, scene.frame_end = frame["frame_start"], frame["frame_end"]
+    scene.render.fps, scene.render.fps_base = frame["fps"], 1.0
+    objects, actions = set(bpy.data.objects), set(bpy.data.actions)
+    try:
+        outcome = bpy.ops.import_scene.gltf(filepath=str(path))
+    except RuntimeError as error:
+        raise ScriptError(f"Blender could not import '{path}': {_first_line(error)}") from None
+    imported = [o for o in bpy.data.objects if o not in objects]
+    if "FINISHED" not in outcome or not imported:
+        raise ScriptError(f"Blender imported nothing from '{path}'")
+    new_actions = [a for a in bpy.data.actions if a not in actions]
+    _retime_gltf_keys(new_actions, settings["fps"], float(frame["fps"]))
+    return imported
+
+
 def _apply_materials(bpy: Any, imported: list[Any], settings: dict[str, Any]) -> None:
     parameters = material_parameters(settings)
-    # Longest first: a group's prim "Tentacles_arms" before "Tentacles".
-    prims = sorted((n for n in parameters if n != "World"), key=len, reverse=True)
+    prims = [n for n in parameters if n != "World"]
     for obj in imported:
-        name = next((n for n in prims if obj.name.startswith(n)), None)
+        name = part_object_prim(obj.name, prims)
         if name is None or not hasattr(obj.data, "materials"):
             continue
         obj.data.materials.clear()
@@ -578,15 +684,15 @@ def _first_line(error: BaseException) -> str:
 
 
 def run(argv: list[str], script: Path) -> None:
-    """Import the stage and set the scene up, then save and render as asked (inside Blender,
-    or a Python with the bpy module)."""
+    """Import the stage or glTF part and set the scene up, then save and render as asked
+    (inside Blender, or a Python with the bpy module)."""
     options = parse_arguments(script_arguments(argv, script))
     try:
         import bpy
     except ImportError:
         raise ScriptError(
-            f"no Blender here: run blender --background --python {SCRIPT} -- STAGE.usdc, or "
-            f"python {SCRIPT} STAGE.usdc with the bpy module installed (pip install bpy)"
+            f"no Blender here: run blender --background --python {SCRIPT} -- FILE, or "
+            f"python {SCRIPT} FILE with the bpy module installed (pip install bpy)"
         ) from None
     if not script.is_file():  # run from Blender's text editor: the text block's file
         texts = [t.filepath for t in bpy.data.texts if t.filepath.endswith(script.name)]
@@ -595,11 +701,12 @@ def run(argv: list[str], script: Path) -> None:
     stage = stage_path(options.stage, script)
     settings = load_settings(stage)
     render = frames_to_render(settings, options.frames) if options.render else []
-    if not bpy.app.build_options.usd:
+    gltf = is_gltf(stage)
+    if not gltf and not bpy.app.build_options.usd:
         raise ScriptError(NO_USD.format(version=bpy.app.version_string))
 
     _clear_start_up_scene(bpy)
-    imported = _import_stage(bpy, stage)
+    imported = _import_gltf(bpy, stage, settings) if gltf else _import_stage(bpy, stage)
     _apply_materials(bpy, imported, settings)
     width, height = options.size
     _add_camera_and_lights(bpy, settings, width / height)

@@ -52,10 +52,13 @@ lists the parts with their frames and times. Every requested frame lands in exac
 Animation times are absolute, ``frame / fps`` seconds, so parts played one after the other
 continue each other; each part's last frame is held for one frame interval (an extra keyframe at
 its end), so a part's animation spans exactly its frames' time: ``first / fps`` to
-``(last + every) / fps``. The glTF scene's ``extras`` carry ``fps``, ``frame_start`` and
-``frame_end`` (frame indices, as Blender numbers its frames when its frame rate is the fps):
-Blender's importer keeps glTF extras as custom properties of its scene but sets neither its
-frame range nor its frame rate from a file (docs/exports.md).
+``(last + every) / fps``. The glTF scene's ``extras`` carry ``fps``, ``frame_start``,
+``frame_end`` and ``frame_step`` (frame indices, as Blender numbers its frames when its frame
+rate is the fps), and under ``jellysim`` the settings the Blender import script reads
+(:mod:`jellysim.export.blender_settings`: the look's colours, the part's frames and bounds, the
+renderers' camera path), as the USD export writes them into its stage. Blender's importer keeps
+these extras as custom properties of its scene but sets neither its frame range nor its frame
+rate from a file; ``import_into_blender.py``, written beside the parts, does (docs/exports.md).
 """
 
 from __future__ import annotations
@@ -72,6 +75,12 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.errors import JellysimError
+from jellysim.export.blender_settings import (
+    BLENDER_SCRIPT,
+    blender_settings,
+    camera_path,
+    write_blender_script,
+)
 from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
 from jellysim.render.materials import Material, bell_material, fluid_material
@@ -415,11 +424,29 @@ def _material(material: Material, **extra: Any) -> dict[str, Any]:
     }
 
 
+def _world_box(geometry: list[dict[str, _Geometry]]) -> tuple[np.ndarray, np.ndarray]:
+    """The corners (3,) m, jellysim's z up, of the box around every object drawn in
+    ``geometry`` (objects per frame, y up); zeros where nothing is drawn."""
+    boxes = [
+        (g.positions.min(axis=0), g.positions.max(axis=0))
+        for objects in geometry
+        for g in objects.values()
+        if g.shown and len(g.positions)
+    ]
+    if not boxes:
+        return np.zeros(3), np.zeros(3)
+    low = np.min([box[0] for box in boxes], axis=0)
+    high = np.max([box[1] for box in boxes], axis=0)
+    # y up (X, Y, Z) is z up (X, -Z, Y): the lowest -Z is minus the highest Z.
+    return np.array([low[0], -high[2], low[1]]), np.array([high[0], -low[2], high[1]])
+
+
 def _build_part(
     source: _Source, frames: range, every: int, part: int, parts: int
-) -> tuple[dict[str, Any], list[bytes]]:
+) -> tuple[dict[str, Any], list[bytes], tuple[np.ndarray, np.ndarray]]:
     """The glTF JSON and the binary chunk (in 4-byte aligned pieces) of one part holding
-    ``frames``: a node and a mesh per object, later frames as morph targets."""
+    ``frames``: a node and a mesh per object, later frames as morph targets; and the box (z up,
+    m) around everything drawn in them."""
     look = source.look
     built = _Part()
     materials: list[dict[str, Any]] = []
@@ -549,7 +576,8 @@ def _build_part(
             {
                 "name": source.name,
                 "nodes": [0],
-                # Blender's importer keeps these as custom properties of its scene.
+                # Blender's importer keeps these as custom properties of its scene;
+                # export_gltf adds the Blender script's settings under "jellysim".
                 "extras": {
                     "fps": source.fps,
                     "frame_start": frames[0],
@@ -571,7 +599,7 @@ def _build_part(
     for key in ("meshes", "materials"):
         if not document[key]:
             del document[key]
-    return document, built.chunks
+    return document, built.chunks, _world_box(geometry)
 
 
 def _glb_bytes(document: dict[str, Any], binary: list[bytes]) -> list[bytes]:
@@ -610,16 +638,25 @@ def export_gltf(
     interpolation: int | None = None,
     budget: int | None = None,
 ) -> list[Path]:
-    """Write ``frames`` as ``OUT/<name>_partNNN.glb`` and the index ``OUT/<name>.gltf-parts.json``;
-    returns the parts, then the index. ``budget``: bytes per part (``PART_BUDGET_BYTES``)."""
+    """Write ``frames`` as ``OUT/<name>_partNNN.glb``, the index ``OUT/<name>.gltf-parts.json``
+    and the Blender import script ``OUT/import_into_blender.py`` (the first part's settings
+    embedded); returns the parts, the index, then the script. ``budget``: bytes per part
+    (``PART_BUDGET_BYTES``)."""
     source = _read(result, interpolation, frames)
     every = frames.step
     runs = _plan_parts(source, frames, PART_BUDGET_BYTES if budget is None else budget)
+    camera = camera_path(result, interpolation)
     paths = []
     entries = []
+    first_settings: dict[str, Any] = {}
     for part, run in enumerate(runs):
         path = out / f"{source.name}_part{part:03d}.glb"
-        document, binary = _build_part(source, run, every, part, len(runs))
+        document, binary, (low, high) = _build_part(source, run, every, part, len(runs))
+        settings = blender_settings(
+            result.scene, run, source.fps, low, high, path.name, source.groups, camera
+        )
+        document["scenes"][0]["extras"]["jellysim"] = settings
+        first_settings = first_settings or settings
         _write(path, _glb_bytes(document, binary))
         paths.append(path)
         entries.append(
@@ -654,4 +691,4 @@ def export_gltf(
     for stale in out.iterdir():
         if own.fullmatch(stale.name) and stale not in paths:
             stale.unlink()
-    return [*paths, index_path]
+    return [*paths, index_path, write_blender_script(out / BLENDER_SCRIPT, first_settings)]

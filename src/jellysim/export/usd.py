@@ -22,7 +22,8 @@ shared materials of :mod:`jellysim.render.materials`: ``diffuseColor``, ``opacit
 The root layer's ``customLayerData["jellysim"]`` holds what a renderer needs besides geometry:
 the scene's ``[look]`` colours, the exported frames (first, last, step) and fps, the bounding
 box of everything over those frames, and the renderers' camera: direction, field of view and
-the path ``jellysim render --camera follow`` moves it along.
+the path ``jellysim render --camera follow`` moves it along
+(:mod:`jellysim.export.blender_settings`, as the glTF export writes them).
 ``OUT/import_into_blender.py`` (the module :mod:`jellysim.export.blender_import`, with those
 settings embedded) sets the stage up in Blender: materials, world, a following camera, lights,
 frame range and fps, and renders or saves it.
@@ -30,17 +31,22 @@ frame range and fps, and renders or saves it.
 
 from __future__ import annotations
 
-import os
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from jellysim import fields
+from jellysim.export.blender_settings import (
+    BLENDER_SCRIPT,
+    blender_settings,
+    camera_path,
+    prim_name,
+    write_blender_script,
+)
 from jellysim.export.groups import ExportGroup, export_groups
 from jellysim.io.result import Result
-from jellysim.render.materials import Material, bell_material, fluid_material, tentacle_material
+from jellysim.render.materials import Material, bell_material, fluid_material
 
 
 def _extent(points: np.ndarray, pad: float = 0.0) -> list[tuple[float, float, float]]:
@@ -57,110 +63,10 @@ def _to_3d(points: np.ndarray) -> np.ndarray:
     return world
 
 
-BLENDER_SCRIPT = "import_into_blender.py"
-
-
-def prim_name(part: str) -> str:
-    """The USD prim (and material) name of an exported part: ``bell`` -> ``Bell``,
-    ``tentacles_oral-arms`` -> ``Tentacles_oral_arms`` (USD names take no ``-``)."""
-    return part[:1].upper() + part[1:].replace("-", "_")
-
-
 def _bounds(low: np.ndarray, high: np.ndarray, box: list[tuple[float, float, float]]) -> None:
     """Grow ``low`` and ``high`` (3,) in place to hold ``box`` (an extent)."""
     np.minimum(low, box[0], out=low)
     np.maximum(high, box[1], out=high)
-
-
-def stage_settings(
-    scene: Any,
-    frames: range,
-    fps: float,
-    low: np.ndarray,
-    high: np.ndarray,
-    stage_file: str,
-    groups: Sequence[ExportGroup] = (),
-    camera: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """The settings written into the stage's metadata and the Blender script (plain values);
-    ``groups`` of a scene of several add each group's prim name and colour, ``camera``
-    (:func:`camera_path`) the path of the renderers' camera."""
-    from jellysim._version import __version__
-    from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
-
-    look = scene_look(scene)
-    bell = bell_material(look)
-    return {
-        "generator": f"jellysim {__version__}",
-        "scene": scene.name,
-        "stage_file": stage_file,
-        "first_frame": frames[0],
-        "last_frame": frames[-1],
-        "frame_step": frames.step,
-        "fps": fps,
-        "bounds_min": [float(v) for v in low],
-        "bounds_max": [float(v) for v in high],
-        "bell_color": [float(v) for v in bell.base_color],
-        "bell_emissive": [float(v) for v in bell.emissive],
-        "bell_transparency": float(look.bell_transparency),
-        "glow": float(look.glow),
-        "tentacle_color": [float(v) for v in tentacle_material(look).base_color],
-        "tentacle_radius": float(look.tentacle_radius),
-        "water_color": [float(v) for v in look.water_color],
-        "fluid_color": [float(v) for v in fluid_material().base_color],
-        "view_direction": [float(v) for v in VIEW_DIRECTION],
-        "field_of_view": float(FIELD_OF_VIEW),
-        **(camera or {}),
-        **(
-            {
-                "group_prims": [prim_name(g.part) for g in groups],
-                "group_colors": [float(c) for g in groups for c in g.material.base_color],
-            }
-            if len(groups) > 1
-            else {}
-        ),
-    }
-
-
-def camera_path(result: Result, interpolation: int | None) -> dict[str, Any]:
-    """Where ``jellysim render --camera follow`` looks (:func:`~jellysim.render.pipeline.
-    camera_targets`), as plain values: the point looked at in frame 0 (``camera_origin``, m), how
-    far it moves each frame (``camera_velocity``, m; the path is a straight line) and the
-    half-size of the box about it that holds the jellyfish in every frame (``camera_half``, m).
-    A result without a jellyfish (a fluid alone) takes ``--camera auto``'s choice, as a render
-    does; ``camera_mode`` names the mode used."""
-    from jellysim.render.pipeline import camera_targets, make_members
-
-    jellyfish = result.has(fields.TENTACLE_POSITION) or result.has(fields.BELL_SURFACE_VERTICES)
-    members = make_members([result], 1, interpolation, 0, fluid=not jellyfish)
-    frames = result.frames
-    targets, half, mode = camera_targets(members, frames, "follow" if jellyfish else "auto")
-    velocity = (targets[-1] - targets[0]) / (frames - 1) if frames > 1 else np.zeros(3)
-    return {
-        "camera_mode": mode,
-        "camera_origin": [float(v) for v in targets[0]],
-        "camera_velocity": [float(v) for v in velocity],
-        "camera_half": [float(v) for v in half],
-    }
-
-
-def write_blender_script(path: Path, settings: dict[str, Any]) -> Path:
-    """``import_into_blender.py``: the module :mod:`jellysim.export.blender_import` with
-    ``settings`` embedded (written to a temporary name, then renamed)."""
-    import pprint
-
-    from jellysim.export import blender_import
-
-    source = Path(blender_import.__file__).read_text(encoding="utf-8")
-    marker = "EMBEDDED_SETTINGS: dict[str, Any] | None = None"
-    assert source.count(marker) == 1
-    embedded = "EMBEDDED_SETTINGS: dict[str, Any] | None = " + pprint.pformat(
-        settings, sort_dicts=False, width=96
-    )
-    temporary = path.with_name(f".{path.name}.tmp")
-    temporary.write_text(source.replace(marker, embedded), encoding="utf-8")
-    os.replace(temporary, path)
-    return path
 
 
 def _bind_material(stage: Any, prim: Any, material: Material) -> None:
@@ -303,7 +209,7 @@ def export_usd(
 
     fps = float(f.attrs["fps"])
     camera = camera_path(result, interpolation)
-    settings = stage_settings(scene, frames, fps, low, high, path.name, groups, camera)
+    settings = blender_settings(scene, frames, fps, low, high, path.name, groups, camera)
 
     def stored(value: Any) -> Any:
         if not isinstance(value, list):
