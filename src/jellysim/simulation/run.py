@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba.core import event
 
 from jellysim.config import Scene, load_scene, scene_to_toml
 from jellysim.config.load import same_scene
@@ -36,11 +37,10 @@ log = logging.getLogger(__name__)
 SCENE_FILE = "scene.toml"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-# Kernels come from Numba's cache in well under a second (docs/performance.md); a preparation
-# still running after this long is compiling them, which a first run on a machine does for 10 to
-# 60 s. Then one line says so, instead of silence (docs/decisions.md, "A notice while kernels
-# compile").
-COMPILE_NOTICE_AFTER = 1.5  # s
+# A first run on a machine compiles the kernels (10 to 60 s); later runs load them from Numba's
+# cache in well under a second. When Numba starts compiling one (its "numba:compile" event, which
+# a cache hit does not raise), one line says so instead of silence (docs/decisions.md, "A notice
+# while kernels compile").
 COMPILE_NOTICE = (
     "compiling jellysim's kernels for this machine (a first run only: up to a minute; later "
     "runs load them from Numba's cache)"
@@ -51,20 +51,30 @@ def default_out(scene: Scene) -> Path:
     return Path("out") / scene.name
 
 
+class _CompileNotice(event.Listener):
+    """Logs :data:`COMPILE_NOTICE` as a warning (seen on stderr with no logging set up) when
+    Numba starts its first compilation while installed."""
+
+    def __init__(self) -> None:
+        self.said = False
+
+    def on_start(self, what: event.Event) -> None:
+        if not self.said:
+            self.said = True
+            log.warning(COMPILE_NOTICE)
+
+    def on_end(self, what: event.Event) -> None:
+        pass
+
+
 @contextmanager
 def _compile_notice(show: bool) -> Iterator[None]:
-    """While the body runs: once it has taken :data:`COMPILE_NOTICE_AFTER`, log
-    :data:`COMPILE_NOTICE` as a warning (seen on stderr with no logging set up), if ``show``."""
+    """While the body runs, say once that kernels compile if Numba compiles any, if ``show``."""
     if not show:
         yield
         return
-    timer = threading.Timer(COMPILE_NOTICE_AFTER, log.warning, args=(COMPILE_NOTICE,))
-    timer.daemon = True
-    timer.start()
-    try:
+    with event.install_listener("numba:compile", _CompileNotice()):
         yield
-    finally:
-        timer.cancel()
 
 
 def _write_text_atomic(path: Path, text: str) -> None:
