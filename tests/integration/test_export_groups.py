@@ -19,6 +19,7 @@ from jellysim.export import export
 from jellysim.export.gltf import TUBE_SIDES, tube_faces
 from jellysim.export.groups import export_groups
 from jellysim.interpolation import interpolate_groups
+from jellysim.render.materials import arm_tissue
 from jellysim.render.pipeline import scene_look
 
 ARMS_COLOR = (0.0, 0.8, 0.1)  # the arms' colour set for the test, unlike any other
@@ -63,7 +64,10 @@ def test_gltf_has_a_primitive_and_material_per_group(
     materials = {m.name: m for m in glb.doc.materials}
     assert set(materials) == {"bell", "tentacles_marginal", "tentacles_oral_arms"}
     arms = materials["tentacles_oral_arms"]
-    np.testing.assert_allclose(arms.pbrMetallicRoughness.baseColorFactor, [*ARMS_COLOR, 1.0])
+    # The arms' translucent tissue, as POV-Ray and the preview draw them (issue 27).
+    opacity = 1.0 - arm_tissue(scene_look(purple.scene)).bell_transparency
+    np.testing.assert_allclose(arms.pbrMetallicRoughness.baseColorFactor, [*ARMS_COLOR, opacity])
+    assert opacity < 1.0 and arms.alphaMode == "BLEND"
     assert arms.doubleSided
     marginal = purple.scene.groups[0].tentacles
     np.testing.assert_allclose(

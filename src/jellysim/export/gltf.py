@@ -412,16 +412,22 @@ def generator() -> str:
 
 
 def _material(material: Material, **extra: Any) -> dict[str, Any]:
-    """A glTF pbrMetallicRoughness material from a shared one (linear RGB, as glTF wants)."""
-    return {
+    """A glTF pbrMetallicRoughness material from a shared one (linear RGB, as glTF wants):
+    translucent (alphaMode BLEND) where its opacity is under 1, glowing (``emissiveFactor``)
+    where it emits."""
+    out: dict[str, Any] = {
         "name": material.name,
         "pbrMetallicRoughness": {
             "baseColorFactor": [*map(float, material.base_color), float(material.opacity)],
             "metallicFactor": 0.0,
             "roughnessFactor": float(material.roughness),
         },
-        **extra,
     }
+    if any(c > 0.0 for c in material.emissive):
+        out["emissiveFactor"] = [float(c) for c in material.emissive]
+    if material.opacity < 1.0:
+        out["alphaMode"] = "BLEND"
+    return {**out, **extra}
 
 
 def _world_box(geometry: list[dict[str, _Geometry]]) -> tuple[np.ndarray, np.ndarray]:
@@ -454,14 +460,7 @@ def _build_part(
     material_of: dict[str, int] = {}
     if source.bell_faces is not None:
         bell = bell_material(look)
-        materials.append(
-            _material(
-                bell,
-                emissiveFactor=[float(c) for c in bell.emissive],
-                alphaMode="BLEND",
-                doubleSided=True,
-            )
-        )
+        materials.append(_material(bell, doubleSided=True))
         material_of["bell"], faces["bell"] = len(materials) - 1, source.bell_faces
     for group in source.groups:
         if group.ribbon:

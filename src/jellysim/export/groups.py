@@ -7,9 +7,12 @@ to the group's own particle count, so the NaN rows of a padded result never reac
 look is :func:`jellysim.render.materials.group_look`'s, the one resolution that POV-Ray, the
 preview and the viewer share: ``[look]`` key by key under the group's own keys.
 
-A one-group scene's group keeps the part name ``tentacles`` and, unless it sets ``color``, the
-material :func:`jellysim.render.materials.tentacle_material` gives, so its files are as before
-groups existed.
+Its material is :func:`jellysim.render.materials.group_material`'s: a thread group's the
+tentacle material in its colour, a ribbon group's (oral arms) the translucent, glowing tissue
+POV-Ray and the preview draw arms in. A one-group scene's group keeps the part name
+``tentacles`` and, unless it sets ``color``, the material
+:func:`jellysim.render.materials.tentacle_material` gives, so its files are as before groups
+existed.
 In a scene of several groups the part of group NAME is ``tentacles_NAME``.
 """
 
@@ -23,7 +26,7 @@ import numpy as np
 from jellysim import fields
 from jellysim.io.result import Result
 from jellysim.render.frame import Look
-from jellysim.render.materials import Material, group_look, tentacle_material
+from jellysim.render.materials import Material, group_look, group_material
 
 ARM_PHASE = 2.399963  # rad: arm k's ruffles are shifted by k times this (the golden angle)
 
@@ -114,13 +117,6 @@ class ExportGroup:
         return ArmsMesh(*(np.concatenate(a) for a in (vertices, faces, normals, arm)))
 
 
-def group_material(look: Look, color: tuple[float, float, float], part: str) -> Material:
-    """The shared tentacle material of ``look`` in the group's ``color``, named ``part`` (a
-    one-group scene's: :func:`~jellysim.render.materials.tentacle_material` itself)."""
-    shared = tentacle_material(look)
-    return Material(part, color, shared.opacity, shared.emissive, shared.roughness)
-
-
 def export_groups(result: Result, look: Look, interpolation: int | None) -> list[ExportGroup]:
     """The result's tentacle groups, drawn (``interpolation`` drawn per simulated tentacle,
     None: each group's own), empty when the result has no tentacles."""
@@ -142,7 +138,7 @@ def export_groups(result: Result, look: Look, interpolation: int | None) -> list
                 index=g.index,
                 part=part,
                 form=t.form or "thread",
-                material=group_material(look, resolved.color, part),
+                material=group_material(look, resolved, part),
                 positions=g.positions,
                 radii=resolved.radius * np.linspace(1.0, resolved.taper, g.positions.shape[2]),
                 width=resolved.ribbon_width,

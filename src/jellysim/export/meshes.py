@@ -66,13 +66,19 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def write_mtl(path: Path, materials: list[Material]) -> None:
-    """``materials`` as a Wavefront MTL file (diffuse ``Kd`` linear RGB, dissolve ``d``)."""
+    """``materials`` as a Wavefront MTL file: diffuse ``Kd`` and emission ``Ke`` (linear RGB),
+    dissolve ``d`` (the opacity), optical density ``Ni`` (the index of refraction) and the PBR
+    extension's roughness ``Pr`` (Blender's OBJ importer reads all five; older tools read
+    ``Kd`` and ``d``)."""
     lines = ["# jellysim materials (linear RGB)"]
     for material in materials:
         lines += [
             f"newmtl {material.name}",
             "Kd {:.6g} {:.6g} {:.6g}".format(*material.base_color),
+            "Ke {:.6g} {:.6g} {:.6g}".format(*material.emissive),
             f"d {material.opacity:.6g}",
+            f"Ni {material.ior:.6g}",
+            f"Pr {material.roughness:.6g}",
         ]
     temporary = path.with_name(path.name + ".tmp")
     temporary.write_text("\n".join(lines) + "\n", encoding="ascii")

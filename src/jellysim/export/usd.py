@@ -4,7 +4,7 @@
 Xform), time codes = frame indices at ``timeCodesPerSecond = framesPerSecond = fps``. Children, as
 the result has them, each bound to a UsdPreviewSurface material under ``/Jellyfish/Looks`` (the
 shared materials of :mod:`jellysim.render.materials`: ``diffuseColor``, ``opacity``,
-``emissiveColor``, ``roughness``, linear RGB) and carrying the same colour and opacity as
+``emissiveColor``, ``roughness``, ``ior``, linear RGB) and carrying the same colour and opacity as
 ``displayColor``/``displayOpacity``:
 
 - ``Bell``: a ``Mesh`` (triangles, counter-clockwise seen from outside, right-handed) with
@@ -86,6 +86,7 @@ def _bind_material(stage: Any, prim: Any, material: Material) -> None:
     )
     shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(material.opacity)
     shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(material.roughness)
+    shader.CreateInput("ior", Sdf.ValueTypeNames.Float).Set(material.ior)
     shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
     shading.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
     UsdShade.MaterialBindingAPI.Apply(prim).Bind(shading)

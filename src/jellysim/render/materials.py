@@ -22,6 +22,12 @@ import numpy as np
 from jellysim.render.frame import FLUID_COLOR, RGB, Look
 
 GLOW_EMISSION = 0.6  # emitted light of the bell at glow 1, fraction of its colour
+BELL_ROUGHNESS = 0.3  # the bell's (and the oral arms') mesoglea: glossy
+TENTACLE_ROUGHNESS = 0.6  # the thread tentacles: duller
+BELL_IOR = 1.02  # the bell's index of refraction: mesoglea is nearly water
+PHONG_SHININESS = 12.0  # a Phong exponent (the viewer's) is this over the roughness
+ARM_CLEARING = 0.5  # an oral arm is this fraction as transparent as the bell,
+ARM_RIM = 0.3  # with this rim: a thicker, frillier tissue that reads against the threads
 STRIPE_TENTACLE_SHARE = 0.65  # a stripe's colour: this much tentacle colour, the rest bell
 DEEP_WATER = 0.25  # the deep water behind a tentacle, fraction of water_color
 STRIPE_TRANSMIT = 0.6  # a stripe lets through this fraction of the light the bell lets through
@@ -33,13 +39,15 @@ STRIPE_PROFILE = ((0.0, 1.0), (0.1, 1.0), (0.3, 0.0), (0.7, 0.0), (0.9, 1.0), (1
 @dataclass(frozen=True)
 class Material:
     """A surface as every output describes it: ``base_color`` and ``emissive`` linear RGB,
-    ``opacity`` 1 opaque (face-on, before the rim), ``roughness`` in [0, 1]."""
+    ``opacity`` 1 opaque (face-on, before the rim), ``roughness`` in [0, 1], ``ior`` the index of
+    refraction of a refracting volume (1: none, a thin or opaque surface)."""
 
     name: str
     base_color: RGB
     opacity: float
     emissive: RGB
     roughness: float
+    ior: float = 1.0
 
 
 def _rgb(values: np.ndarray) -> RGB:
@@ -49,14 +57,15 @@ def _rgb(values: np.ndarray) -> RGB:
 
 def bell_material(look: Look) -> Material:
     """The bell: its colour, ``1 - bell_transparency`` opaque, glowing ``GLOW_EMISSION glow`` of
-    its colour."""
+    its colour, refracting ``BELL_IOR``."""
     color = np.asarray(look.bell_color, dtype=np.float64)
     return Material(
         name="bell",
         base_color=_rgb(color),
         opacity=1.0 - float(look.bell_transparency),
         emissive=_rgb(GLOW_EMISSION * look.glow * color),
-        roughness=0.3,
+        roughness=BELL_ROUGHNESS,
+        ior=BELL_IOR,
     )
 
 
@@ -68,8 +77,37 @@ def tentacle_material(look: Look) -> Material:
         base_color=_rgb(np.asarray(look.tentacle_color, dtype=np.float64)),
         opacity=1.0,
         emissive=(0.0, 0.0, 0.0),
-        roughness=0.6,
+        roughness=TENTACLE_ROUGHNESS,
     )
+
+
+def arm_tissue(look: Look) -> Look:
+    """The oral arms' tissue: the bell's, ``ARM_CLEARING`` times as transparent, rim
+    ``ARM_RIM``, so that face-on an arm shows its colour through the veil of threads."""
+    return replace(look, bell_transparency=ARM_CLEARING * look.bell_transparency, rim=ARM_RIM)
+
+
+def group_material(look: Look, group: GroupLook, name: str) -> Material:
+    """The material of one tentacle group drawn as ``group``, named ``name``: a thread group
+    :func:`tentacle_material` in its colour; a ribbon group (oral arms) the bell's tissue in its
+    colour, :func:`arm_tissue`'s transparency, glowing as the bell does (POV-Ray's and the
+    preview's ribbons are drawn in the same tissue)."""
+    if group.form == "ribbon":
+        color = np.asarray(group.color, dtype=np.float64)
+        return Material(
+            name=name,
+            base_color=_rgb(color),
+            opacity=1.0 - float(arm_tissue(look).bell_transparency),
+            emissive=_rgb(GLOW_EMISSION * look.glow * color),
+            roughness=BELL_ROUGHNESS,
+        )
+    return replace(tentacle_material(look), name=name, base_color=group.color)
+
+
+def phong_shininess(material: Material) -> float:
+    """The Phong exponent of ``material``'s roughness (three.js's ``shininess``, the viewer's):
+    ``PHONG_SHININESS / roughness``."""
+    return PHONG_SHININESS / max(material.roughness, 1e-3)
 
 
 RIBBON_WIDTH_SPACINGS = 4.0  # a ribbon's width at the root, unset: this many particle spacings

@@ -42,6 +42,7 @@ from jellysim.render.materials import (
     GLOW_EMISSION,
     STRIPE_PROFILE,
     STRIPE_TRANSMIT,
+    arm_tissue,
     bell_material,
     bell_transmit,
     stripe_color,
@@ -295,8 +296,9 @@ def bell_block(jelly: Jellyfish, quality: Quality) -> str:
     finish = "finish { ambient 0.1 diffuse 0.3 specular 0.3 roughness 0.005"
     finish += f" emission {GLOW_EMISSION * look.glow:.3g} }}" if quality.glow else " }"
     interior, inside = "", ""
+    ior = bell_material(look).ior
     if quality.glow:
-        interior = " interior { ior 1.02 }"
+        interior = f" interior {{ ior {ior:.4g} }}"
     if quality.glow and is_closed(faces):  # media need a closed surface with an inside
         inside = "  inside_vector <0,1,0>"
         bell = np.asarray(look.bell_color, dtype=np.float64)
@@ -305,7 +307,7 @@ def bell_block(jelly: Jellyfish, quality: Quality) -> str:
         scattering = 2.0 * bell / size
         absorption = 0.8 * (1.0 - bell) / size
         interior = (
-            " interior { ior 1.02 media { method 3 intervals 1 samples 3 "
+            f" interior {{ ior {ior:.4g} media {{ method 3 intervals 1 samples 3 "
             f"emission {_rgb(emission)} scattering {{ 1, {_rgb(scattering)} extinction 0.5 }} "
             f"absorption {_rgb(absorption)} }} }}"
         )
@@ -338,10 +340,17 @@ def tentacles_block(
     parts = []
     for group in jelly.drawn():
         if group.look.form == "ribbon":
-            parts.append(ribbons_block(jelly, group, glow))
+            block = ribbons_block(jelly, group, glow)
         else:
-            parts.append(threads_block(group.positions, thread_look(jelly.look, group.look), water))
+            block = threads_block(group.positions, thread_look(jelly.look, group.look), water)
+        parts.append(_named(f"tentacles {group.look.name}", block))
     return "".join(parts)
+
+
+def _named(name: str, block: str) -> str:
+    """``block`` (one object) after a comment line ``// object NAME`` that says which object of
+    the jellyfish it is (for people and tests reading the scene); "" stays ""."""
+    return f"// object {name}\n{block}" if block else ""
 
 
 def threads_block(tentacles: np.ndarray, look: Look, water: Iterable[float]) -> str:
@@ -381,16 +390,6 @@ def ribbons_block(jelly: Jellyfish, group: DrawnTentacles, glow: bool) -> str:
     from jellysim.render.ribbons import povray_ribbons
 
     return povray_ribbons(arm_meshes(jelly, group), group.look.color, arm_tissue(jelly.look), glow)
-
-
-ARM_CLEARING = 0.5  # an oral arm is this fraction as transparent as the bell,
-ARM_RIM = 0.3  # with this rim: a thicker, frillier tissue that reads against the threads
-
-
-def arm_tissue(look: Look) -> Look:
-    """The oral arms' tissue: the bell's, ``ARM_CLEARING`` times as transparent, rim
-    ``ARM_RIM``, so that face-on an arm shows its colour through the veil of threads."""
-    return replace(look, bell_transparency=ARM_CLEARING * look.bell_transparency, rim=ARM_RIM)
 
 
 def arm_meshes(jelly: Jellyfish, group: DrawnTentacles) -> list[RibbonMesh]:
@@ -553,9 +552,9 @@ def scene_text(
             if quality.light_shafts:
                 parts.append(light_shafts_block(camera, look, water, seed))
     for jelly in frame.jellyfish:
-        parts.append(bell_block(jelly, quality))
-        parts.append(gonads_block(jelly, quality.glow))
-        parts.append(manubrium_block(jelly, quality.glow))
+        parts.append(_named("bell", bell_block(jelly, quality)))
+        parts.append(_named("gonads", gonads_block(jelly, quality.glow)))
+        parts.append(_named("manubrium", manubrium_block(jelly, quality.glow)))
         parts.append(tentacles_block(jelly, water, quality))
     parts.append(fluid_block(frame, fluid_style))
     return "".join(parts)

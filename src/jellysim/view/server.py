@@ -192,6 +192,7 @@ class ResultData:
         from jellysim.render.materials import (
             STRIPE_TRANSMIT,
             bell_material,
+            phong_shininess,
             stripe_color,
             tentacle_face_color,
             tentacle_material,
@@ -260,6 +261,7 @@ class ResultData:
                 "tentacle_color": _color(tentacle.base_color),
                 "bell_transparency": float(look.bell_transparency),
                 "bell_emissive": _color(bell.emissive),
+                "bell_shininess": phong_shininess(bell),
                 "tentacle_face_color": _color(tentacle_face_color(look)),
                 "rim": float(look.rim),
                 "stripes": int(look.stripes),
@@ -303,13 +305,21 @@ class ResultData:
     def _groups_meta(self, look: Any) -> list[dict[str, Any]]:
         """Per group: ``name``, ``form`` ("thread" or "ribbon"), ``color`` and ``face_color``
         (linear RGB: its colour, and seen face-on as a line, ``tentacle_face_color``),
-        ``particles``, ``simulated``, ``clusters`` (sizes of its rows of roots, one: a ring),
+        ``opacity``, ``emissive`` (linear RGB) and ``shininess`` (Phong) of its material
+        (:func:`~jellysim.render.materials.group_material`), ``particles``, ``simulated``,
+        ``clusters`` (sizes of its rows of roots, one: a ring),
         ``radius`` m and ``taper`` (threads), ``width`` m at the root (ribbons)."""
-        from jellysim.render.materials import group_look, tentacle_face_color
+        from jellysim.render.materials import (
+            group_look,
+            group_material,
+            phong_shininess,
+            tentacle_face_color,
+        )
 
         out = []
         for g, group in zip(self.groups, self.result.scene.groups, strict=True):
             drawn = group_look(look, group.tentacles, g.name)
+            material = group_material(look, drawn, g.name)
             out.append(
                 {
                     "name": g.name,
@@ -318,6 +328,9 @@ class ResultData:
                     "face_color": _color(
                         tentacle_face_color(replace(look, tentacle_color=drawn.color))
                     ),
+                    "opacity": material.opacity,
+                    "emissive": _color(material.emissive),
+                    "shininess": phong_shininess(material),
                     "particles": g.particles,
                     "simulated": g.rows.stop - g.rows.start,
                     "clusters": list(g.clusters),

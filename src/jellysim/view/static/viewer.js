@@ -37,7 +37,30 @@ window.jellysimView = Object.freeze({
   get drawnTentacles() { return state.drawnTentacles; },
   get fluidPoints() { return state.fluidPoints; },
   get error() { return state.error; },
+  get materials() { return describeMaterials(); },
 });
+
+// What each drawn object's three.js material is (the hook's `materials`): by object name.
+const drawnObjects = [];
+function describeMaterials() {
+  const rgb = (color) => (color ? color.toArray() : null); // linear, as three.js holds them
+  return Object.fromEntries(
+    drawnObjects.map((object) => {
+      const m = object.material;
+      return [
+        object.name,
+        {
+          type: m.type,
+          color: rgb(m.color),
+          emissive: rgb(m.emissive),
+          opacity: m.opacity,
+          transparent: m.transparent,
+          shininess: m.shininess ?? null,
+        },
+      ];
+    }),
+  );
+}
 
 function showError(error) {
   state.error = String(error.message ?? error);
@@ -70,7 +93,7 @@ function bellMaterial(look) {
     opacity: 1 - t,
     side: THREE.DoubleSide,
     depthWrite: false,
-    shininess: 40,
+    shininess: look.bell_shininess,
   });
   material.onBeforeCompile = (shader) => {
     Object.assign(shader.uniforms, uniforms);
@@ -250,7 +273,11 @@ async function main() {
   scene.add(camera);
 
   const bell = meta.bell.present ? makeBell(meta, faces) : null;
-  if (bell) scene.add(bell);
+  if (bell) {
+    bell.name = "bell";
+    scene.add(bell);
+    drawnObjects.push(bell);
+  }
   const tentacles = new THREE.LineSegments(
     new THREE.BufferGeometry(),
     // Lines face the camera: the tentacles' face-on colour (tentacle_transparency), as the
@@ -265,7 +292,15 @@ async function main() {
       group.form === "ribbon"
         ? new THREE.Mesh(
             ribbonGeometry(group.simulated, group.particles),
-            new THREE.MeshPhongMaterial({ color: linear(group.color), side: THREE.DoubleSide, shininess: 20 }),
+            new THREE.MeshPhongMaterial({
+              color: linear(group.color),
+              emissive: linear(group.emissive),
+              transparent: group.opacity < 1,
+              opacity: group.opacity,
+              depthWrite: group.opacity >= 1,
+              side: THREE.DoubleSide,
+              shininess: group.shininess,
+            }),
           )
         : new THREE.LineSegments(
             new THREE.BufferGeometry(),
@@ -275,11 +310,20 @@ async function main() {
     object.frustumCulled = false;
     object.userData.drawn = group.form === "ribbon" ? group.simulated : 0;
     scene.add(object);
+    drawnObjects.push(object);
     return { group, object };
   });
-  if (groups.length === 0) scene.add(tentacles);
+  tentacles.name = "tentacles";
+  if (groups.length === 0) {
+    scene.add(tentacles);
+    drawnObjects.push(tentacles);
+  }
   const fluid = meta.fluid.present ? makeFluid(meta, kinds, camera.fov) : null;
-  if (fluid) scene.add(fluid);
+  if (fluid) {
+    fluid.name = "fluid";
+    scene.add(fluid);
+    drawnObjects.push(fluid);
+  }
 
   // Controls: shown only for what the result has.
   $("bell-toggle").hidden = !bell;
