@@ -27,9 +27,26 @@ def main() -> None:
     args = parser.parse_args()
     from dask_jobqueue import PBSCluster, SLURMCluster
 
-    kind = PBSCluster if args.pbs else SLURMCluster
-    # One point per worker at a time; a point's Numba kernels use the job's cores.
-    with kind(cores=4, processes=1, memory="8GB", walltime="02:00:00") as cluster:
+    # Each batch job books 4 cores for one Dask worker that runs one task, one point, at a time
+    # (cores=1: one thread; several would run points at once in one process, each using every
+    # core). The point's Numba kernels use the job's 4 cores: NUMBA_NUM_THREADS, shared among
+    # the worker's threads (docs/sweeps.md).
+    cores = 4
+    booked: dict[str, object]
+    if args.pbs:
+        booked = {"resource_spec": f"select=1:ncpus={cores}:mem=8GB"}
+        kind = PBSCluster
+    else:
+        booked = {"job_cpu": cores}
+        kind = SLURMCluster
+    with kind(
+        cores=1,
+        processes=1,
+        memory="8GB",
+        walltime="02:00:00",
+        job_script_prologue=[f"export NUMBA_NUM_THREADS={cores}"],
+        **booked,
+    ) as cluster:
         cluster.scale(jobs=args.jobs)
         traces = jellysim.sweep(
             "forced-tentacles",

@@ -7,6 +7,8 @@ import sys
 
 import matplotlib.image
 
+from jellysim.simulation.run import COMPILE_NOTICE
+
 
 def jellysim(cwd, *args):
     # A scheduler that does not answer is given up after a second, not Dask's 30.
@@ -59,6 +61,7 @@ def test_sweep_rejects_bad_values_before_writing(tmp_path):
         ("--vary", "flow.speed=1", "--workers", "0"),
         ("--vary", "flow.speed=1", "--scheduler", "not-an-address"),
         ("--vary", "flow.speed=1", "--scheduler", "tcp://127.0.0.1:9"),  # nothing listens
+        ("--vary", "flow.speed=0,0.0"),  # one point twice (one scene)
     ):
         proc = jellysim(tmp_path, "sweep", "brown-jelly", *args, "--out", "figs")
         assert proc.returncode == 2
@@ -96,3 +99,34 @@ def test_a_point_that_fails_is_one_line_and_its_status(tmp_path):
     assert "run the sweep again to continue" in line
     assert len(list((tmp_path / "figs" / "points").glob("*/result.h5"))) == 1
     assert not list((tmp_path / "figs").glob("sweep_*"))
+
+
+def test_a_duplicate_point_is_named(tmp_path):
+    proc = jellysim(tmp_path, "sweep", "brown-jelly", "--vary", "flow.speed=0.5,1,0.5")
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "jellysim: error: points 0 (flow.speed = 0.5) and 2 (flow.speed = 0.5) are the same "
+        "scene: give each point once"
+    )
+
+
+def test_a_sweep_that_compiles_gives_the_notice_once_and_quiet_none(tmp_path):
+    """Issue 27's compile notice in a sweep whose two workers both compile (an empty Numba
+    cache): once for the sweep, not once per worker; with --quiet, nothing."""
+    sweep = ["sweep", "brown-jelly", "--vary", "flow.speed=0,0.5", "--workers", "2"]
+    tiny = ["--set", "tentacles.count=1", "--set", "duration=0.1"]
+    for quiet, notices in ((False, 1), (True, 0)):
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / f"cache-{quiet}")}
+        proc = subprocess.run(
+            [sys.executable, "-m", "jellysim", *sweep, *tiny, "--out", f"s-{quiet}"]
+            + ["--quiet"] * quiet,
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=600,
+        )
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stderr.count(COMPILE_NOTICE) == notices, proc.stderr
+        if quiet:
+            assert proc.stderr == ""

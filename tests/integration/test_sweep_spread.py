@@ -8,21 +8,29 @@ are one brown-jelly tentacle for a fraction of a second (tens of frames)."""
 
 from __future__ import annotations
 
+import fcntl
+import os
 import signal
 import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
 
 import distributed
 import h5py
+import numba
 import numpy as np
 import pytest
 import xarray
 
+from jellysim.config import load_scene
+from jellysim.errors import JellysimError
 from jellysim.io.checkpoint import CHECKPOINT_FILE
-from jellysim.studies.points import POINTS_FOLDER, PROGRESS_FILE
+from jellysim.io.result import Result
+from jellysim.studies.points import POINTS_FOLDER, PROGRESS_FILE, use_point_threads
+from jellysim.studies.sweep import _run_points
 
 TINY = ["--set", "tentacles.count=1", "--set", "solver.checkpoint_every=1"]
 GRID = ["--vary", "flow.speed=0,0.5", "--vary", "tentacles.youngs_modulus=1e4,1e6"]
@@ -158,9 +166,35 @@ def test_zip_pairs_the_lists(tmp_path: Path) -> None:
     assert list(points["tentacles.youngs_modulus"].values) == [1e4, 1e6]
 
 
+def _closed(folder: Path) -> bool:
+    """Whether no run holds ``folder``'s writer lock (an flock on the folder, held by a run until
+    its result file is closed and its sidecar written)."""
+    descriptor = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    finally:
+        os.close(descriptor)  # releases the lock at once if it was taken
+    return True
+
+
+def _done(folder: Path) -> bool:
+    """Whether ``folder``'s point is over: its result is complete and its run has let go of the
+    folder, so nothing writes there again (the last frame's progress report comes before the
+    run's last flush and the closing of its files, which a killed sweep's worker still does)."""
+    if not (folder / "result.h5").is_file() or not _closed(folder):
+        return False
+    try:
+        with Result(folder) as result:
+            return result.complete
+    except (OSError, JellysimError):  # being created
+        return False
+
+
 def _kill_mid_way(process: subprocess.Popen[str], out: Path, frames: int) -> dict[str, int]:
-    """SIGKILL the sweep once a point is finished and another holds a checkpoint short of its
-    end; the finished points' result files (name: inode and modification time)."""
+    """SIGKILL the sweep once a point is done and another holds a checkpoint short of its end;
+    the done points' result files (name: inode and modification time)."""
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline:
         assert process.poll() is None, "the sweep ended before it could be killed"
@@ -171,7 +205,7 @@ def _kill_mid_way(process: subprocess.Popen[str], out: Path, frames: int) -> dic
                 progress[folder] = int((folder / PROGRESS_FILE).read_text())
             except (OSError, ValueError):
                 progress[folder] = 0
-        done = [f for f, frame in progress.items() if frame == frames]
+        done = [f for f, frame in progress.items() if frame == frames and _done(f)]
         partial = [
             f
             for f, frame in progress.items()
@@ -231,3 +265,43 @@ def test_a_killed_sweep_keeps_its_finished_points_and_resumes_the_others(
     whole = jellysim(tmp_path, *args[:-2], "--workers", "1", "--out", "whole", "--quiet")
     assert whole.returncode == 0, whole.stderr
     assert_same_sweep(tmp_path / "whole", tmp_path / "killed", "sweep_flow_speed")
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_an_unforeseen_error_in_a_point_is_one_line_wherever_it_runs(
+    workers: int, tmp_path: Path
+) -> None:
+    """A bug in a point's run (here: scene text that does not read as TOML, which a sweep never
+    sends) fails the point with status 1 and one line, alike in the sweep's own process (one
+    worker) and in worker processes (two): no traceback, no "its worker died"."""
+    scene = load_scene("brown-jelly", {"tentacles.count": 1, "duration": 0.1})
+    folders = [tmp_path / "a", tmp_path / "b"]
+    with ExitStack() as stack:
+        outcomes = _run_points(
+            [scene, scene], ["a = [", "b = ["], folders, workers, None, True, True, stack
+        )
+    assert sorted(outcome.index for outcome in outcomes.values()) == [0, 1]
+    for outcome in outcomes.values():
+        assert (outcome.mode, outcome.status) == ("failed", 1)
+        assert outcome.message.startswith("internal error: TOMLDecodeError: "), outcome.message
+        assert outcome.message.endswith("(set JELLYSIM_DEBUG=1 for the traceback)")
+        assert "\n" not in outcome.message
+
+
+def _point_threads() -> int:
+    use_point_threads(None)
+    return numba.get_num_threads()
+
+
+def test_a_dask_point_takes_its_workers_share_of_numbas_threads() -> None:
+    """A point on a Dask worker of two threads (two points at once) gets half of Numba's threads
+    (set in the task's own thread: Numba's setting is per thread); outside Dask, as they are."""
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        threads = client.submit(_point_threads, pure=False).result()
+    assert threads == max(1, numba.config.NUMBA_NUM_THREADS // 2)
+    assert _point_threads() == numba.get_num_threads()

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import ctypes
+import logging
 import multiprocessing
 import os
 import signal
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,10 +24,13 @@ from jellysim.errors import InputError, JellysimError
 from jellysim.io.folders import check_writable, output_folder
 from jellysim.io.result import Result
 from jellysim.progress import progress
+from jellysim.simulation.run import COMPILE_NOTICE
 from jellysim.studies.plan import Plan, grid, listed
 from jellysim.studies.points import (
+    NOTICE_FILE,
     PointOutcome,
     PointTask,
+    compiling,
     describe_point,
     finished,
     frames_done,
@@ -35,12 +39,15 @@ from jellysim.studies.points import (
 )
 from jellysim.studies.traces import Trace, own_particles
 
+log = logging.getLogger(__name__)
+
 POLL_INTERVAL = 0.5  # s between looks at the points' progress files
 
 
 class SweepFailed(JellysimError):
     """A point of the sweep failed; ``exit_status`` is that of its error (2 input, 3 unstable,
-    4 output, 128 + a signal's number when a signal stopped its worker, 1 otherwise)."""
+    4 output, 128 + a signal's number when a signal stopped its worker, 1 otherwise: its
+    worker died, or an internal error)."""
 
     def __init__(self, message: str, exit_status: int) -> None:
         super().__init__(message)
@@ -135,6 +142,8 @@ def run_sweep(
     )
     scenes = [load_scene(scene, {**base, **point}) for point in plan.points]
     particles = [_traced_particles(loaded, tentacle) for loaded in scenes]
+    texts = [scene_to_toml(loaded) for loaded in scenes]
+    _refuse_duplicates(plan, texts)
     with ExitStack() as stack:
         # The cluster first: an unreachable scheduler is refused before anything is written.
         cluster = _dask_executor(scheduler, stack) if scheduler is not None else None
@@ -144,7 +153,6 @@ def run_sweep(
             folder = Path(out).absolute()
             check_writable(folder)
             output_folder(folder)
-        texts = [scene_to_toml(loaded) for loaded in scenes]
         folders = [point_folder(folder, text) for text in texts]
         outcomes = _run_points(
             scenes, texts, folders, workers, cluster, quiet, estimate_check, stack
@@ -173,6 +181,19 @@ def run_sweep(
         resumed=modes.count("resumed"),
         started=modes.count("started"),
     )
+
+
+def _refuse_duplicates(plan: Plan, texts: list[str]) -> None:
+    """Each point once: two points of one resolved scene (``--values 0,0``, or ``1`` and
+    ``1.0``) would be one run counted and tabled twice."""
+    first: dict[str, int] = {}
+    for index, text in enumerate(texts):
+        if text in first:
+            raise InputError(
+                f"points {first[text]} ({describe_point(plan.points[first[text]])}) and {index} "
+                f"({describe_point(plan.points[index])}) are the same scene: give each point once"
+            )
+        first[text] = index
 
 
 def _traced_particles(scene: Scene, tentacle: int) -> int:
@@ -204,20 +225,25 @@ def _run_points(
     estimate_check: bool,
     stack: ExitStack,
 ) -> dict[Path, PointOutcome]:
-    """Run each distinct point folder once (two points of one scene share a folder), on the
-    ``cluster`` when there is one; the outcome of each folder."""
+    """Run each point (each its own folder: :func:`_refuse_duplicates`) in this process, in
+    local worker processes or on the ``cluster``; the outcome of each folder."""
     tasks: dict[Path, PointTask] = {}
     frames: dict[Path, int] = {}
     for index, (loaded, text, where) in enumerate(zip(scenes, texts, folders, strict=True)):
-        if where not in tasks:
-            tasks[where] = PointTask(index, text, str(where), estimate_check)
-            frames[where] = loaded.frame_count - 1
+        tasks[where] = PointTask(index, text, str(where), estimate_check, quiet)
+        frames[where] = loaded.frame_count - 1
     outcomes = {
         where: PointOutcome(task.index, "kept")
         for where, task in tasks.items()
         if finished(where, task.scene_toml)
     }
-    pending = [task for where, task in tasks.items() if where not in outcomes]
+    at_once = min(workers or _cores(), len(tasks) - len(outcomes))
+    # Numba's threads: a local worker's share of the cores; on a cluster, its worker's share
+    # (use_point_threads); one point after another in this process: as they are.
+    threads = max(1, _cores() // at_once) if cluster is None and at_once > 1 else None
+    pending = [
+        replace(task, threads=threads) for where, task in tasks.items() if where not in outcomes
+    ]
     total = sum(frames.values())
     seen = {where: frames[where] if where in outcomes else frames_done(where) for where in frames}
     bar = stack.enter_context(progress(total, sum(seen.values()), quiet, "sweep", delay=2.0))
@@ -232,7 +258,7 @@ def _run_points(
 
     if not pending:
         return outcomes
-    if cluster is None and min(workers or _cores(), len(pending)) == 1:
+    if cluster is None and at_once == 1:
         for task in pending:  # one at a time in this process: no process to start
             where = Path(task.folder)
 
@@ -245,9 +271,12 @@ def _run_points(
                 seen[where] = frames[where]
             report()
         return outcomes
-    executor = cluster or _process_executor(min(workers or _cores(), len(pending)), stack)
+    executor = cluster or _process_executor(at_once, stack)
+    for task in pending:  # a notice left by a killed sweep's worker
+        (Path(task.folder) / NOTICE_FILE).unlink(missing_ok=True)
     futures = {executor.submit(run_point, task): Path(task.folder) for task in pending}
     waiting = set(futures)
+    noticed = quiet  # the workers' compile notice, shown once for the sweep
     while waiting:
         done, waiting = cf.wait(waiting, timeout=POLL_INTERVAL, return_when=cf.FIRST_COMPLETED)
         for future in done:
@@ -258,8 +287,20 @@ def _run_points(
         for future in waiting:
             where = futures[future]
             seen[where] = max(seen[where], min(frames_done(where), frames[where]))
+            if not noticed and compiling(where):
+                noticed = True
+                _show_notice()
         report()
     return outcomes
+
+
+def _show_notice() -> None:
+    """The compile notice, once for the sweep (each worker compiles; each would say so), as a
+    run gives it (a logging warning), clear of the progress bar."""
+    from tqdm import tqdm
+
+    with tqdm.external_write_mode():
+        log.warning(COMPILE_NOTICE)
 
 
 def _outcome(future: cf.Future[PointOutcome], index: int) -> PointOutcome:
@@ -279,14 +320,13 @@ def _cores() -> int:
 
 
 def _process_executor(workers: int, stack: ExitStack) -> cf.Executor:
-    """``workers`` fresh Python processes (spawned: no inherited threads or kernels), each using
-    its share of the cores for Numba's threads; they end with this process."""
-    threads = max(1, _cores() // workers)
+    """``workers`` fresh Python processes (spawned: no inherited threads or kernels); they end
+    with this process (each point's task gives Numba its share of the cores)."""
     executor = cf.ProcessPoolExecutor(
         workers,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=_start_worker,
-        initargs=(os.getpid(), threads),
+        initargs=(os.getpid(),),
     )
     stack.enter_context(_shut_down(executor))
     return executor
@@ -305,9 +345,9 @@ def _shut_down(executor: cf.Executor) -> Iterator[None]:
     executor.shutdown(wait=True)
 
 
-def _start_worker(parent: int, threads: int) -> None:
+def _start_worker(parent: int) -> None:
     """A local worker: SIGTERM when the sweep's process dies, whatever kills it (Linux), so its
-    run stops at a frame with a checkpoint instead of running on unseen; ``threads`` for Numba."""
+    run stops at a frame with a checkpoint instead of running on unseen."""
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
@@ -315,9 +355,6 @@ def _start_worker(parent: int, threads: int) -> None:
         pass
     if os.getppid() != parent:  # the sweep died before the signal was asked for
         os._exit(1)
-    import numba
-
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
 
 
 def _dask_executor(scheduler: str, stack: ExitStack) -> cf.Executor:
