@@ -26,6 +26,7 @@ import jellysim
 from jellysim import fields
 from jellysim.export import export
 from jellysim.export.groups import export_groups
+from jellysim.render.materials import Material, bell_material, group_look, group_material
 from jellysim.render.pipeline import VIEW_DIRECTION, frame_cameras, make_members, scene_look
 
 pxr = pytest.importorskip("pxr", reason="usd-core is a test dependency (pip install -e .[test])")
@@ -36,9 +37,30 @@ BPY_PYTHON = Path(os.environ.get("JELLYSIM_BPY_PYTHON", ROOT / ".venv-blender" /
 SIZE = (160, 120)
 TIMEOUT = 240  # s for one Blender run (a few seconds each here)
 
-# Reads a saved .blend back, in the bpy venv: the scene's objects, frames, fps, render settings
-# and the camera's world location and view direction at every frame.
-READ_BLEND = """
+# The inputs of each object's Principled BSDF in a .blend opened in the bpy venv: "shading"
+# maps an object's name to its first material's inputs and render method.
+READ_SHADING = """
+def shading(objects):
+    inputs = ("Base Color", "Alpha", "Transmission Weight", "Roughness", "Emission Color",
+              "Emission Strength", "IOR")
+    found = {}
+    for obj in objects:
+        if not getattr(obj.data, "materials", None):
+            continue
+        material = obj.data.materials[0]
+        shader = material.node_tree.nodes["Principled BSDF"]
+        values = {n: shader.inputs[n].default_value for n in inputs}
+        found[obj.name] = {n: v if isinstance(v, float) else list(v) for n, v in values.items()}
+        found[obj.name]["method"] = material.surface_render_method
+    return found
+"""
+
+# Reads a saved .blend back, in the bpy venv: the scene's objects, frames, fps, render settings,
+# each object's material inputs and the camera's world location and view direction at every
+# frame.
+READ_BLEND = (
+    READ_SHADING
+    + """
 import json, sys
 import bpy
 bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
@@ -55,6 +77,7 @@ facts = {
     "camera": {},
     "materials": {o.name: [m.name for m in o.data.materials]
                   for o in scene.objects if hasattr(o.data, "materials")},
+    "shading": shading(scene.objects),
 }
 for frame in range(scene.frame_start, scene.frame_end + 1):
     scene.frame_set(frame)
@@ -65,6 +88,7 @@ for frame in range(scene.frame_start, scene.frame_end + 1):
     }
 print("FACTS " + json.dumps(facts))
 """
+)
 
 
 def _bpy_python() -> Path:
@@ -128,6 +152,49 @@ def _srgb(linear: list[float] | tuple[float, ...]) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
+def _expected_materials(result: jellysim.Result) -> dict[str, Material]:
+    """Each object's material as materials.py resolves it, by prim name: the bell's and each
+    tentacle group's."""
+    look = scene_look(result.scene)
+    expected = {"Bell": bell_material(look)}
+    for group in result.scene.groups:
+        name = f"tentacles_{group.name}"
+        drawn = group_look(look, group.tentacles, name)
+        expected[f"Tentacles_{group.name.replace('-', '_')}"] = group_material(look, drawn, name)
+    return expected
+
+
+def _assert_shading_is_the_look(shading: dict, result: jellysim.Result, names: dict) -> None:
+    """Each object's Principled BSDF inputs (``shading``, read back from the .blend) against
+    its material from materials.py (``names``: object name to prim name): base colour, opacity
+    as alpha and the rest as transmission, roughness, emission colour at strength 1, ior, and
+    blending for a translucent material."""
+    expected = _expected_materials(result)
+    assert set(names.values()) == set(expected)
+    for obj, prim in names.items():
+        inputs, material = shading[obj], expected[prim]
+        np.testing.assert_allclose(inputs["Base Color"], [*material.base_color, 1.0], atol=1e-6)
+        assert inputs["Alpha"] == pytest.approx(material.opacity, abs=1e-6), obj
+        assert inputs["Transmission Weight"] == pytest.approx(1.0 - material.opacity, abs=1e-6)
+        assert inputs["Roughness"] == pytest.approx(material.roughness, abs=1e-6), obj
+        emitted = inputs["Emission Strength"] * np.asarray(inputs["Emission Color"][:3])
+        np.testing.assert_allclose(emitted, material.emissive, atol=1e-6)
+        assert inputs["IOR"] == pytest.approx(material.ior, abs=1e-6), obj
+        assert inputs["method"] == ("BLENDED" if material.opacity < 1.0 else "DITHERED"), obj
+    # brown-jelly's oral arms: translucent glowing tissue, unlike the opaque threads.
+    arms, threads = (
+        shading[_key(names, "Tentacles_oral_arms")],
+        shading[_key(names, "Tentacles_marginal")],
+    )
+    assert arms["Alpha"] < 1.0 and threads["Alpha"] == 1.0
+    assert max(arms["Emission Color"][:3]) > 0.0 and max(threads["Emission Color"][:3]) == 0.0
+    assert arms["Roughness"] < threads["Roughness"]
+
+
+def _key(names: dict, prim: str) -> str:
+    return next(obj for obj, p in names.items() if p == prim)
+
+
 def test_the_start_up_scene_is_replaced_by_the_stage(rendered) -> None:
     facts, _, blend = rendered
     assert blend.is_file()
@@ -143,6 +210,15 @@ def test_the_start_up_scene_is_replaced_by_the_stage(rendered) -> None:
     assert facts["materials"]["Bell"] == ["jellysim Bell"]
     assert facts["materials"]["Tentacles_oral_arms"] == ["jellysim Tentacles_oral_arms"]
     assert facts["engine"] == "CYCLES" and facts["resolution"] == list(SIZE)
+
+
+def test_each_object_s_material_is_the_look_s(exported, rendered) -> None:
+    """One look in Blender too: the saved .blend's materials are materials.py's (the oral arms'
+    translucent, glowing tissue included)."""
+    result, _, _, _ = exported
+    facts, _, _ = rendered
+    names = {p: p for p in ("Bell", "Tentacles_marginal", "Tentacles_oral_arms")}
+    _assert_shading_is_the_look(facts["shading"], result, names)
 
 
 def test_frame_range_and_fps_are_the_stage_s(exported, rendered) -> None:
@@ -254,10 +330,13 @@ def test_a_blender_without_usd_is_told_which_builds_read_it(exported, tmp_path: 
 # The glTF route: a part of a result at a frame rate Blender stores as fps / fps_base (12.5 =
 # 12 / 0.96), which its glTF importer misreads (it keys time x fps x fps_base).
 
-# Reads a saved .blend back, in the bpy venv: frames, fps, objects, materials, shape keys, the
+# Reads a saved .blend back, in the bpy venv: frames, fps, objects, materials and their inputs,
+# shape keys, the
 # keyframes' frames, the camera's location, and every mesh's evaluated world vertices at every
 # frame of the range (argv[2], a .npz).
-READ_GLTF_BLEND = """
+READ_GLTF_BLEND = (
+    READ_SHADING
+    + """
 import json, sys
 import bpy
 import numpy as np
@@ -270,6 +349,7 @@ facts = {
     "fps": scene.render.fps / scene.render.fps_base,
     "materials": {o.name: [m.name for m in o.data.materials] for o in meshes},
     "shape_keys": {o.name: len(o.data.shape_keys.key_blocks) for o in meshes},
+    "shading": shading(meshes),
     "keys": sorted({k.co[0] for a in bpy.data.actions for layer in a.layers
                     for strip in layer.strips for bag in strip.channelbags
                     for curve in bag.fcurves for k in curve.keyframe_points}),
@@ -291,6 +371,7 @@ for frame in range(scene.frame_start, scene.frame_end + 1):
 np.savez(sys.argv[2], **positions)
 print("FACTS " + json.dumps(facts))
 """
+)
 
 
 @pytest.fixture(scope="module")
@@ -343,6 +424,16 @@ def test_gltf_the_start_up_scene_is_replaced_by_the_part(gltf_rendered) -> None:
     }
     # A shape key per frame: the basis (frame 0) and one per later frame.
     assert set(facts["shape_keys"].values()) == {result.frames}
+
+
+def test_gltf_each_object_s_material_is_the_look_s(gltf_rendered) -> None:
+    result, facts, _, _ = gltf_rendered
+    names = {
+        "bell": "Bell",
+        "tentacles_marginal": "Tentacles_marginal",
+        "tentacles_oral_arms": "Tentacles_oral_arms",
+    }
+    _assert_shading_is_the_look(facts["shading"], result, names)
 
 
 def test_gltf_frame_range_fps_and_keys_are_the_result_s(gltf_rendered) -> None:

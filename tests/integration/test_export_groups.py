@@ -127,8 +127,10 @@ def test_usd_has_a_prim_per_group_and_passes_validation(
     shader = UsdShade.Shader(stage.GetPrimAtPath(f"{bound.GetPath()}/PreviewSurface"))
     np.testing.assert_allclose(shader.GetInput("diffuseColor").Get(), ARMS_COLOR, atol=1e-7)
     data = dict(stage.GetRootLayer().customLayerData)["jellysim"]
-    assert list(data["group_prims"]) == ["Tentacles_marginal", "Tentacles_oral_arms"]
-    np.testing.assert_allclose(list(data["group_colors"])[3:], ARMS_COLOR)
+    assert set(data["materials"]) == {"Bell", "Tentacles_marginal", "Tentacles_oral_arms", "Fluid"}
+    np.testing.assert_allclose(
+        list(data["materials"]["Tentacles_oral_arms"]["base_color"]), ARMS_COLOR
+    )
     # The Blender script gives each group's object its colour (its logic, without Blender).
     spec = importlib.util.spec_from_file_location("import_into_blender", script_path)
     assert spec is not None and spec.loader is not None
@@ -140,6 +142,10 @@ def test_usd_has_a_prim_per_group_and_passes_validation(
     assert parameters["Tentacles_oral_arms"]["base_color"] == [*ARMS_COLOR, 1.0]
     marginal = purple.scene.groups[0].tentacles.color
     np.testing.assert_allclose(parameters["Tentacles_marginal"]["base_color"], [*marginal, 1.0])
+    # The arms in their translucent tissue, the threads opaque (groups' materials).
+    arms = parameters["Tentacles_oral_arms"]
+    assert arms["alpha"] == pytest.approx(groups[1].material.opacity) and arms["alpha"] < 1.0
+    assert arms["blend"] and not parameters["Tentacles_marginal"]["blend"]
 
 
 def test_vtk_has_a_part_per_group_with_the_group_array(

@@ -15,7 +15,7 @@ import jellysim
 from jellysim import fields
 from jellysim.export import export
 from jellysim.interpolation import interpolate_result
-from jellysim.render.materials import bell_material, tentacle_material
+from jellysim.render.materials import bell_material, fluid_material, tentacle_material
 from jellysim.render.pipeline import (
     FIELD_OF_VIEW,
     VIEW_DIRECTION,
@@ -207,10 +207,18 @@ def test_the_script_reads_the_stage_metadata(blender_export) -> None:
     assert settings == script.settings_from_metadata(script.EMBEDDED_SETTINGS)  # the same copy
     assert script.load_settings(stage_path) == settings
     look = scene_look(result.scene)
-    np.testing.assert_allclose(settings["bell_color"], look.bell_color)
-    np.testing.assert_allclose(settings["tentacle_color"], look.tentacle_color)
+    assert set(settings["materials"]) == {"Bell", "Tentacles", "Fluid"}
+    for name, material in (
+        ("Bell", bell_material(look)),
+        ("Tentacles", tentacle_material(look)),
+        ("Fluid", fluid_material()),
+    ):
+        stored = settings["materials"][name]
+        np.testing.assert_allclose(stored["base_color"], material.base_color)
+        np.testing.assert_allclose(stored["emissive"], material.emissive)
+        for key in ("opacity", "roughness", "ior"):
+            assert stored[key] == pytest.approx(getattr(material, key)), (name, key)
     np.testing.assert_allclose(settings["water_color"], look.water_color)
-    assert settings["bell_transparency"] == pytest.approx(look.bell_transparency)
     assert settings["tentacle_radius"] == pytest.approx(look.tentacle_radius)
     assert (settings["first_frame"], settings["last_frame"], settings["frame_step"]) == (1, 3, 2)
     assert settings["fps"] == 10.0 and settings["stage_file"] == stage_path.name
@@ -295,6 +303,10 @@ def test_materials_lights_and_render_settings(blender_export) -> None:
     materials = script.material_parameters(settings)
     np.testing.assert_allclose(materials["Bell"]["base_color"], [*look.bell_color, 1.0])
     assert materials["Bell"]["alpha"] == pytest.approx(1.0 - look.bell_transparency)
+    assert materials["Bell"]["transmission"] == pytest.approx(look.bell_transparency)
+    assert materials["Bell"]["ior"] == pytest.approx(bell_material(look).ior)
+    assert materials["Bell"]["roughness"] == pytest.approx(bell_material(look).roughness)
+    assert materials["Tentacles"]["roughness"] == pytest.approx(tentacle_material(look).roughness)
     emitted = np.multiply(
         materials["Bell"]["emission_strength"], materials["Bell"]["emission_color"]
     )

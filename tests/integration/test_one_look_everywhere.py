@@ -24,6 +24,8 @@ read back and each object's material (the bell, each group) compared with the on
   fraction of the pigment's colour), the bell's ``ior``; threads their colour at the silhouette
   and face-on colour. POV-Ray's ``roughness`` is the size of a Phong highlight, not the PBR
   roughness, so it is not compared.
+- Blender: checked in ``tests/integration/test_blender_import.py`` (the import script under
+  bpy; each object's Principled BSDF read back from the saved .blend, USD and glTF routes).
 
 Convention: colours are linear RGB everywhere they are stored (scene files, glTF, USD, MTL,
 meta.json, three.js in ``LinearSRGBColorSpace``, POV-Ray with ``assumed_gamma 1.0``); a

@@ -18,19 +18,21 @@ was exported with, next to it: the stage, or the first glTF part). In an unsaved
 start-up scene) it first removes every object (the default cube, light and camera); a saved
 file's objects are kept. It imports the file (``bpy.ops.wm.usd_import``, or
 ``bpy.ops.import_scene.gltf`` with the file's fps as the scene's, its keyframes then put on the
-exported frame numbers), gives the bell a translucent glowing material and the tentacles and
-fluid theirs in the scene's ``[look]`` colours (each tentacle group of a scene of several in
-its own colour), colours the world as the water, adds a camera that follows the jellyfish as
+exported frame numbers), gives each object (the bell, each tentacle group, the fluid) a
+Principled BSDF built from the material the exporter resolved for it from the scene's
+``[look]``, the one every jellysim renderer and export draws it in (:func:`material_parameters`),
+colours the world as the water, adds a camera that follows the jellyfish as
 ``jellysim render --camera follow`` does, a key light and a fill light that moves with the
 camera, sets the frame range, frame step, fps and resolution from the file and Cycles as the
 render engine; then ``--save`` saves the .blend and ``--render`` renders frames to PNG (the
 first exported frame, or those of ``--frames`` A to B-1: one frame to OUT.png itself, several to
 OUT_NNNNN.png). Any failure is one line on stderr and exit status 2.
 
-What it needs of the file (colours, frame range, bounds, the renderers' camera direction, field
-of view and path) the exporter writes into the stage's layer metadata (``customLayerData``, key
-``jellysim``) or the glTF scene's ``extras`` (key ``jellysim``) and, for a Blender whose Python
-lacks USD's ``pxr`` module (the ``bpy`` module), into ``EMBEDDED_SETTINGS`` below. Everything but
+What it needs of the file (materials, water colour, frame range, bounds, the renderers' camera
+direction, field of view and path) the exporter writes into the stage's layer metadata
+(``customLayerData``, key ``jellysim``) or the glTF scene's ``extras`` (key ``jellysim``) and,
+for a Blender whose Python lacks USD's ``pxr`` module (the ``bpy`` module), into
+``EMBEDDED_SETTINGS`` below. Everything but
 :func:`run` and its helpers is plain Python on plain values; ``bpy`` and ``pxr`` are imported
 only inside the functions that need them, so the file imports (and is tested) without Blender.
 It imports nothing of jellysim.
@@ -62,9 +64,11 @@ VECTORS = (
     "camera_velocity",
     "camera_half",
 )
-COLORS = ("bell_color", "bell_emissive", "tentacle_color", "water_color", "fluid_color")
-NUMBERS = ("fps", "bell_transparency", "glow", "tentacle_radius", "field_of_view")
+COLORS = ("water_color",)
+NUMBERS = ("fps", "tentacle_radius", "field_of_view")
 INTEGERS = ("first_frame", "last_frame", "frame_step")
+MATERIAL_COLORS = ("base_color", "emissive")  # of each object's material: linear RGB
+MATERIAL_NUMBERS = ("opacity", "roughness", "ior")
 NO_USD = (
     "Blender {version} was built without USD support (as Debian's and Ubuntu's blender "
     "packages are): use an official build from blender.org, or the bpy module (pip install bpy)"
@@ -81,12 +85,28 @@ def is_gltf(path: str | Path) -> bool:
     return Path(path).suffix.lower() in GLTF_SUFFIXES
 
 
+def _material_settings(name: str, material: Any) -> dict[str, Any]:
+    """One object's material (``materials[name]`` of the settings) as plain values; raises
+    ScriptError naming what is missing or malformed."""
+    try:
+        settings: dict[str, Any] = {k: [float(v) for v in material[k]] for k in MATERIAL_COLORS}
+        settings.update({k: float(material[k]) for k in MATERIAL_NUMBERS})
+    except (KeyError, TypeError, ValueError):
+        raise ScriptError(
+            f"the file's jellysim settings have no whole material for '{name}' (export it again "
+            "with this jellysim)"
+        ) from None
+    if any(len(settings[k]) != 3 for k in MATERIAL_COLORS):
+        raise ScriptError(f"the file's jellysim settings give '{name}' a colour not of 3 values")
+    return settings
+
+
 def settings_from_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
     """The stage's ``customLayerData['jellysim']`` (or the glTF scene's ``extras['jellysim']``)
-    as plain Python values (lists of floats for vectors and colours); raises ScriptError naming
-    a missing key."""
+    as plain Python values (lists of floats for vectors and colours, ``materials`` a dict of
+    each object's material by prim name); raises ScriptError naming a missing key."""
     settings: dict[str, Any] = {}
-    for key in (*VECTORS, *COLORS, *NUMBERS, *INTEGERS, "stage_file"):
+    for key in (*VECTORS, *COLORS, *NUMBERS, *INTEGERS, "stage_file", "materials"):
         if key not in metadata:
             raise ScriptError(
                 f"the file's jellysim settings lack '{key}' (export it again with this jellysim)"
@@ -98,12 +118,12 @@ def settings_from_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
     for key in INTEGERS:
         settings[key] = int(metadata[key])
     settings["stage_file"] = str(metadata["stage_file"])
-    # A scene of several tentacle groups: each group's prim name and colour (flat, 3 a group).
-    prims = [str(name) for name in metadata.get("group_prims", ())]
-    colors = [float(v) for v in metadata.get("group_colors", ())]
-    if len(colors) != 3 * len(prims):
-        raise ScriptError("the file's jellysim settings have group_colors unlike group_prims")
-    settings["group_colors"] = {name: colors[3 * k : 3 * k + 3] for k, name in enumerate(prims)}
+    materials = metadata["materials"]
+    if not hasattr(materials, "items"):
+        raise ScriptError("the file's jellysim settings have 'materials' that is not a table")
+    settings["materials"] = {
+        str(name): _material_settings(str(name), material) for name, material in materials.items()
+    }
     return settings
 
 
@@ -385,43 +405,30 @@ def light_rig(half: list[float], distance: float) -> list[dict[str, Any]]:
     ]
 
 
-def material_parameters(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """Principled BSDF inputs per imported prim (Bell, Tentacles, each tentacle group's prim,
-    Fluid) and the world colour, from the shared materials of the scene's [look] as the other
-    exports use them."""
-    bell = settings["bell_color"]
-    parameters = {
-        "Bell": {
-            "base_color": [*bell, 1.0],
-            "alpha": 1.0 - settings["bell_transparency"],
-            "roughness": 0.3,
-            "transmission": settings["bell_transparency"],
-            "emission_color": [*settings["bell_emissive"], 1.0],
-            "emission_strength": 1.0,
-            "blend": True,
-        },
-        "Tentacles": {
-            "base_color": [*settings["tentacle_color"], 1.0],
-            "alpha": 1.0,
-            "roughness": 0.6,
-            "transmission": 0.0,
-            "emission_color": [0.0, 0.0, 0.0, 1.0],
-            "emission_strength": 0.0,
-            "blend": False,
-        },
-        "Fluid": {
-            "base_color": [*settings["fluid_color"], 1.0],
-            "alpha": 0.4,
-            "roughness": 0.2,
-            "transmission": 0.0,
-            "emission_color": [0.0, 0.0, 0.0, 1.0],
-            "emission_strength": 0.0,
-            "blend": True,
-        },
-        "World": {"color": [*settings["water_color"], 1.0], "strength": 1.0},
+def bsdf_parameters(material: dict[str, Any]) -> dict[str, Any]:
+    """Principled BSDF inputs of one object's material (plain values, as in the settings): its
+    base colour; its opacity as ``alpha`` and the rest, ``1 - opacity``, as transmission (a
+    translucent material blended in EEVEE); its roughness; its emission as the emission colour
+    at strength 1; its ior."""
+    opacity = material["opacity"]
+    return {
+        "base_color": [*material["base_color"], 1.0],
+        "alpha": opacity,
+        "transmission": 1.0 - opacity,
+        "roughness": material["roughness"],
+        "emission_color": [*material["emissive"], 1.0],
+        "emission_strength": 1.0,
+        "ior": material["ior"],
+        "blend": opacity < 1.0,
     }
-    for name, color in settings.get("group_colors", {}).items():
-        parameters[name] = {**parameters["Tentacles"], "base_color": [*color, 1.0]}
+
+
+def material_parameters(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Principled BSDF inputs per imported prim (Bell, Tentacles or each tentacle group's
+    prim, Fluid; :func:`bsdf_parameters` of its material in the settings) and the world
+    colour."""
+    parameters = {name: bsdf_parameters(m) for name, m in settings["materials"].items()}
+    parameters["World"] = {"color": [*settings["water_color"], 1.0], "strength": 1.0}
     return parameters
 
 
@@ -471,6 +478,7 @@ def _material(name: str, parameters: dict[str, Any]) -> Any:
     _set_input(shader, ("Transmission Weight", "Transmission"), parameters["transmission"])
     _set_input(shader, ("Emission Color", "Emission"), parameters["emission_color"])
     _set_input(shader, ("Emission Strength",), parameters["emission_strength"])
+    _set_input(shader, ("IOR",), parameters["ior"])
     if parameters["blend"]:
         if hasattr(material, "surface_render_method"):  # EEVEE Next (Blender 4.2 and later)
             material.surface_render_method = "BLENDED"

@@ -4,9 +4,11 @@
 (``customLayerData["jellysim"]``), ``--format gltf`` in each part's glTF scene ``extras``
 (``extras["jellysim"]``); both write ``import_into_blender.py`` (the module
 :mod:`jellysim.export.blender_import`) beside the files, with one export's settings embedded.
-The settings are plain values: the scene's ``[look]`` colours, the exported frames and fps, the
-bounding box of everything over those frames and the renderers' camera (direction, field of
-view and the path of ``jellysim render --camera follow``).
+The settings are plain values: each object's material as every output draws it (``materials``:
+per prim name, the :class:`~jellysim.render.materials.Material` that
+:mod:`jellysim.render.materials` resolves from the scene's ``[look]``), the water colour, the
+exported frames and fps, the bounding box of everything over those frames and the renderers'
+camera (direction, field of view and the path of ``jellysim render --camera follow``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,12 @@ import numpy as np
 from jellysim import fields
 from jellysim.export.groups import ExportGroup
 from jellysim.io.result import Result
-from jellysim.render.materials import bell_material, fluid_material, tentacle_material
+from jellysim.render.materials import (
+    Material,
+    bell_material,
+    fluid_material,
+    tentacle_material,
+)
 
 BLENDER_SCRIPT = "import_into_blender.py"
 
@@ -32,6 +39,18 @@ def prim_name(part: str) -> str:
     ``tentacles_oral-arms`` -> ``Tentacles_oral_arms`` (USD names take no ``-``); the Blender
     script finds a glTF object of the part by this name too (ignoring case and ``-``)."""
     return part[:1].upper() + part[1:].replace("-", "_")
+
+
+def material_settings(material: Material) -> dict[str, Any]:
+    """``material`` as plain values: ``base_color`` and ``emissive`` linear RGB, ``opacity``,
+    ``roughness``, ``ior``."""
+    return {
+        "base_color": [float(v) for v in material.base_color],
+        "opacity": float(material.opacity),
+        "emissive": [float(v) for v in material.emissive],
+        "roughness": float(material.roughness),
+        "ior": float(material.ior),
+    }
 
 
 def blender_settings(
@@ -46,14 +65,18 @@ def blender_settings(
 ) -> dict[str, Any]:
     """The settings of one exported file (plain values): ``frames`` it holds at ``fps``, the
     box ``low`` to ``high`` (3,) m, z up, around everything in them, ``file_name`` (the key
-    ``stage_file``: the stage or the glTF part); ``groups`` of a scene of several add each
-    group's prim name and colour, ``camera`` (:func:`camera_path`) the path of the renderers'
-    camera."""
+    ``stage_file``: the stage or the glTF part), ``camera`` (:func:`camera_path`) the path of
+    the renderers' camera; ``materials`` (:func:`material_settings`) per prim name: the bell's,
+    each of ``groups``' (the tentacle groups exported; none: the tentacles' of ``[look]``) and
+    the fluid's."""
     from jellysim._version import __version__
     from jellysim.render.pipeline import FIELD_OF_VIEW, VIEW_DIRECTION, scene_look
 
     look = scene_look(scene)
-    bell = bell_material(look)
+    tentacles = {prim_name(g.part): g.material for g in groups} or {
+        "Tentacles": tentacle_material(look)
+    }
+    materials = {"Bell": bell_material(look), **tentacles, "Fluid": fluid_material()}
     return {
         "generator": f"jellysim {__version__}",
         "scene": scene.name,
@@ -64,25 +87,12 @@ def blender_settings(
         "fps": fps,
         "bounds_min": [float(v) for v in low],
         "bounds_max": [float(v) for v in high],
-        "bell_color": [float(v) for v in bell.base_color],
-        "bell_emissive": [float(v) for v in bell.emissive],
-        "bell_transparency": float(look.bell_transparency),
-        "glow": float(look.glow),
-        "tentacle_color": [float(v) for v in tentacle_material(look).base_color],
+        "materials": {name: material_settings(m) for name, m in materials.items()},
         "tentacle_radius": float(look.tentacle_radius),
         "water_color": [float(v) for v in look.water_color],
-        "fluid_color": [float(v) for v in fluid_material().base_color],
         "view_direction": [float(v) for v in VIEW_DIRECTION],
         "field_of_view": float(FIELD_OF_VIEW),
         **(camera or {}),
-        **(
-            {
-                "group_prims": [prim_name(g.part) for g in groups],
-                "group_colors": [float(c) for g in groups for c in g.material.base_color],
-            }
-            if len(groups) > 1
-            else {}
-        ),
     }
 
 

@@ -213,6 +213,8 @@ def export_usd(
     settings = blender_settings(scene, frames, fps, low, high, path.name, groups, camera)
 
     def stored(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {key: stored(item) for key, item in value.items()}
         if not isinstance(value, list):
             return value
         if value and isinstance(value[0], str):
