@@ -1,0 +1,72 @@
+"""Does the moon-jelly bell re-open and keep swimming? Five 2 s pulses of the tests' coarse moon
+jelly (tests/scenes.py SWIM: l0 = 0.25 m, 448 bell particles) at several multiples of the paper's
+spring stiffness (issue 26; the table in docs/soft-bell.md, "A bell that pulses").
+
+    python benchmarks/bell_pulses.py [FACTOR ...] [--out DIR]
+
+For each factor F the springs are F x 31.25 N/m (the paper's k = 20 N/m at l0 = 0.16 m, scaled to
+this spacing); printed per pulse: the peak contraction, the lowest contraction after it within
+the pulse, and the rise of the bell's centre. The preset's factor is 64.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from scenes import SWIM, SWIM_PERIOD  # noqa: E402
+
+import jellysim  # noqa: E402
+
+PULSES = 5
+PAPER_K_COARSE = 31.25  # N/m: 20 N/m x 0.25 / 0.16
+
+
+def pulses(factor: float, out: Path) -> list[tuple[float, float, float]]:
+    """(peak, lowest after it, rise in m) for each pulse of the run at ``factor``."""
+    overrides = {
+        **SWIM,
+        "duration": PULSES * SWIM_PERIOD,
+        "bell.spring_stiffness": PAPER_K_COARSE * factor,
+    }
+    with jellysim.run("moon-jelly", out, overrides=overrides, force=True) as result:
+        t = np.asarray(result.time)
+        contraction = result.bell_contraction
+        height = result.bell_centre[:, 2]
+    rows = []
+    for k in range(PULSES):
+        first = int(np.argmin(np.abs(t - k * SWIM_PERIOD)))
+        last = int(np.argmin(np.abs(t - (k + 1) * SWIM_PERIOD)))
+        peak = first + int(np.argmax(contraction[first : last + 1]))
+        rows.append(
+            (
+                float(contraction[peak]),
+                float(contraction[peak : last + 1].min()),
+                float(height[last] - height[first]),
+            )
+        )
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("factors", nargs="*", type=float, default=[1.0, 16.0, 64.0, 256.0])
+    parser.add_argument("--out", default="out/bell-pulses")
+    args = parser.parse_args()
+    for factor in args.factors:
+        start = time.perf_counter()
+        rows = pulses(factor, Path(args.out) / f"k{factor:g}")
+        print(f"factor {factor:g} (k = {PAPER_K_COARSE * factor:g} N/m), "
+              f"{time.perf_counter() - start:.0f} s")  # fmt: skip
+        for k, (peak, lowest, rise) in enumerate(rows):
+            print(f"  pulse {k}: peak {peak:.3f}, lowest after it {lowest:.3f}, rise {rise:+.3f} m")
+
+
+if __name__ == "__main__":
+    main()
