@@ -215,7 +215,9 @@ class ResultWriter:
 
     Beside ``result.h5`` the writer keeps ``result.xdmf`` (:mod:`jellysim.io.xdmf`), the XDMF
     description through which ParaView and VisIt open the result: written with the file, again
-    at flushes (see :meth:`_write_sidecar`) and on :meth:`close`, always whole.
+    at flushes (see :meth:`_write_sidecar`) and on :meth:`close`, always whole. Whenever
+    ``result.xdmf`` is there, it lists frames the ``result.h5`` beside it holds, with its
+    shapes: the old sidecar is removed before a new file takes the name.
     """
 
     def __init__(
@@ -236,6 +238,7 @@ class ResultWriter:
         """
         self.path = path
         self.frames = 0 if initial is None else int(initial[fields.TIME.path].shape[0])
+        sidecar = path.with_suffix(".xdmf")
         temporary = path.with_name(path.name + ".tmp")
         try:
             f = h5py.File(temporary, "w", libver=LIBVER, locking=False)
@@ -264,6 +267,10 @@ class ResultWriter:
             for key, value in attributes.items():
                 f.attrs[key] = value
             f.flush()
+            # The sidecar of the file being replaced goes first: killed between the two, the
+            # folder holds the old file without a sidecar, never the new one with the old's
+            # (a resume's file holds fewer frames, a --force's other shapes).
+            sidecar.unlink(missing_ok=True)
             os.replace(temporary, path)  # only now visible, complete (open files move)
         except OSError as err:
             _abandon(f)
@@ -274,7 +281,7 @@ class ResultWriter:
             temporary.unlink(missing_ok=True)
             raise
         self._file = f
-        self._sidecar = path.with_suffix(".xdmf")
+        self._sidecar = sidecar
         self._sidecar_frames = -1  # the frames the sidecar on disk lists
         self._sidecar_bytes = 0
         self._sidecar_seconds = 0.0  # what its last write took
