@@ -138,7 +138,7 @@ def sidecar_frames(folder: Path) -> int | None:
     reader.SetFileName(str(sidecar))
     reader.UpdateInformation()
     times = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
-    listed = list(times or ())  # none in a sidecar written before the first frame
+    listed = list(times or ())
     frames = plain_frames(folder / "result.h5")
     assert len(listed) <= frames, f"{XDMF_FILE} lists {len(listed)} frames of {frames}"
     with h5py.File(folder / "result.h5", "r") as f:

@@ -146,8 +146,7 @@ def test_a_run_stopped_at_any_moment_opens_everywhere_and_resumes_bit_for_bit(
             assert tree["time"].shape[0] >= frames
             assert not any(str(d).startswith("phony_dim") for n in tree.subtree for d in n.dims)
         # ParaView's XDMF reader opens the sidecar: frames the result holds, at their times
-        # (written just after the file is created: a stop in between leaves a file of no frame
-        # without one).
+        # (written once the file holds frames: a file of no frame has none).
         assert sidecar_frames(out) is not None or frames == 0
     else:
         assert seen == 0

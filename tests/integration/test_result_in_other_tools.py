@@ -138,7 +138,7 @@ def _read_xdmf(path: Path) -> tuple[list[float], list[dict[str, dict[str, Any]]]
     reader.SetFileName(str(path))
     reader.UpdateInformation()
     listed = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
-    times = list(listed or ())  # none before the first frame
+    times = list(listed or ())
     steps = []
     for t in times:
         reader.UpdateTimeStep(t)
@@ -281,14 +281,14 @@ def test_export_elsewhere_names_the_result_from_there(tentacles: Path, tmp_path:
 
 
 def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> None:
-    """Written with the file (no frame yet), then at flushes: it always opens and lists frames
-    the result holds; at the end, every frame."""
+    """Written at flushes, from the first frame on (none of no frame: vtkXdmfReader crashes on
+    one of a single part, the 2-D fluid's): it always opens and lists frames the result holds;
+    at the end, every frame."""
     from jellysim.io.result import ResultWriter, frame_datasets
 
     path = tmp_path / "result.h5"
     writer = ResultWriter(path, frame_datasets(2, 3, 4), {"fps": 10.0}, batch_frames=2)
-    assert (tmp_path / "result.xdmf").is_file()
-    assert _read_xdmf(tmp_path / "result.xdmf")[0] == []
+    assert not (tmp_path / "result.xdmf").exists()
     rng = np.random.default_rng(1)
     for k in range(5):
         writer.append(
@@ -303,8 +303,10 @@ def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> N
                 "bell/margin": rng.random((4, 3)),
             }
         )
-        listed = len(_read_xdmf(tmp_path / "result.xdmf")[0])
-        assert listed <= writer.frames
+        sidecar = tmp_path / "result.xdmf"
+        assert sidecar.is_file() == (writer.frames > 0)
+        listed = len(_read_xdmf(sidecar)[0]) if sidecar.is_file() else 0
+        assert 0 < listed <= writer.frames or listed == writer.frames == 0
     writer.close()
     times, steps = _read_xdmf(tmp_path / "result.xdmf")
     with h5py.File(path, "r") as f:

@@ -214,8 +214,9 @@ class ResultWriter:
     the file then keeps the frames of the last good flush and is written no more.
 
     Beside ``result.h5`` the writer keeps ``result.xdmf`` (:mod:`jellysim.io.xdmf`), the XDMF
-    description through which ParaView and VisIt open the result: written with the file, again
-    at flushes (see :meth:`_write_sidecar`) and on :meth:`close`, always whole. Whenever
+    description through which ParaView and VisIt open the result: written with the file's first
+    frames (with the file, for a resume's), again at flushes (see :meth:`_write_sidecar`) and on
+    :meth:`close`, always whole. Whenever
     ``result.xdmf`` is there, it lists frames the ``result.h5`` beside it holds, with its
     shapes: the old sidecar is removed before a new file takes the name.
     """
@@ -315,8 +316,10 @@ class ResultWriter:
         """Write the XDMF sidecar (:mod:`jellysim.io.xdmf`) listing the frames flushed, whole
         or not at all. Unless ``force``, skipped while less than :data:`SIDECAR_PAUSE` times its
         last write's duration has passed since then, so rewriting a long run's sidecar takes at
-        most a twentieth of the run's time; :meth:`close` writes it last."""
-        if self._sidecar_frames == self.frames:
+        most a twentieth of the run's time; :meth:`close` writes it last. None of no frame:
+        ``vtkXdmfReader`` crashes (SIGSEGV) on a temporal collection without grids, and on a
+        document without collections."""
+        if self._sidecar_frames == self.frames or self.frames == 0:
             return
         now = time.monotonic()
         if not force and now - self._sidecar_at < SIDECAR_PAUSE * self._sidecar_seconds:

@@ -17,7 +17,8 @@ export names them (docs/exports.md):
   ``pressure``, ``number_density``, ``alive``, ``kind``.
 
 The writer (:class:`jellysim.io.result.ResultWriter`) removes the old sidecar before its new
-file takes the name ``result.h5``, writes the sidecar after, and again as frames are flushed,
+file takes the name ``result.h5``, writes the sidecar once the file holds a frame (a document
+of no frame crashes ``vtkXdmfReader``), and again as frames are flushed,
 each time whole into a temporary file then renamed over the old one, so a sidecar on disk always
 opens and lists frames the ``result.h5`` beside it holds.
 ``jellysim export DIR --format xdmf`` writes one for a result written before sidecars.
