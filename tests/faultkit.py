@@ -9,9 +9,11 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 import jellysim
 from jellysim import fields
+from jellysim.io.xdmf import XDMF_FILE, xdmf_text
 
 RUNNER = Path(__file__).parent / "faults" / "runner.py"
 
@@ -118,3 +120,31 @@ def one_line(stderr: str) -> str:
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
     return lines[0]
+
+
+def sidecar_frames(folder: Path) -> int | None:
+    """Check the XDMF sidecar beside ``folder``'s result.h5 against the file, as it is now, and
+    return how many frames it lists (None: no sidecar). Whenever it is there it must list a
+    prefix of the frames result.h5 holds, at their times, and be the very document the writer
+    makes of result.h5 for those frames (so its hyperslabs fit the datasets' shapes); ParaView's
+    XDMF reader (VTK's ``vtkXdmfReader``) then reads its last time step's points."""
+    sidecar = folder / XDMF_FILE
+    if not sidecar.exists():
+        return None
+    xdmf = pytest.importorskip("vtkmodules.vtkIOXdmf2")
+    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
+
+    reader = xdmf.vtkXdmfReader()
+    reader.SetFileName(str(sidecar))
+    reader.UpdateInformation()
+    times = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
+    listed = list(times or ())
+    frames = plain_frames(folder / "result.h5")
+    assert len(listed) <= frames, f"{XDMF_FILE} lists {len(listed)} frames of {frames}"
+    with h5py.File(folder / "result.h5", "r") as f:
+        np.testing.assert_array_equal(listed, f[fields.TIME.path][: len(listed)])
+        assert sidecar.read_text() == xdmf_text(f, "result.h5", range(len(listed)))
+    if listed:
+        reader.UpdateTimeStep(listed[-1])
+        assert reader.GetOutputDataObject(0).GetNumberOfPoints() > 0
+    return len(listed)

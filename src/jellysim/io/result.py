@@ -214,8 +214,11 @@ class ResultWriter:
     the file then keeps the frames of the last good flush and is written no more.
 
     Beside ``result.h5`` the writer keeps ``result.xdmf`` (:mod:`jellysim.io.xdmf`), the XDMF
-    description through which ParaView and VisIt open the result: written with the file, again
-    at flushes (see :meth:`_write_sidecar`) and on :meth:`close`, always whole.
+    description through which ParaView and VisIt open the result: written with the file's first
+    frames (with the file, for a resume's), again at flushes (see :meth:`_write_sidecar`) and on
+    :meth:`close`, always whole. Whenever
+    ``result.xdmf`` is there, it lists frames the ``result.h5`` beside it holds, with its
+    shapes: the old sidecar is removed before a new file takes the name.
     """
 
     def __init__(
@@ -236,6 +239,7 @@ class ResultWriter:
         """
         self.path = path
         self.frames = 0 if initial is None else int(initial[fields.TIME.path].shape[0])
+        sidecar = path.with_suffix(".xdmf")
         temporary = path.with_name(path.name + ".tmp")
         try:
             f = h5py.File(temporary, "w", libver=LIBVER, locking=False)
@@ -264,6 +268,10 @@ class ResultWriter:
             for key, value in attributes.items():
                 f.attrs[key] = value
             f.flush()
+            # The sidecar of the file being replaced goes first: killed between the two, the
+            # folder holds the old file without a sidecar, never the new one with the old's
+            # (a resume's file holds fewer frames, a --force's other shapes).
+            sidecar.unlink(missing_ok=True)
             os.replace(temporary, path)  # only now visible, complete (open files move)
         except OSError as err:
             _abandon(f)
@@ -274,7 +282,7 @@ class ResultWriter:
             temporary.unlink(missing_ok=True)
             raise
         self._file = f
-        self._sidecar = path.with_suffix(".xdmf")
+        self._sidecar = sidecar
         self._sidecar_frames = -1  # the frames the sidecar on disk lists
         self._sidecar_bytes = 0
         self._sidecar_seconds = 0.0  # what its last write took
@@ -308,8 +316,10 @@ class ResultWriter:
         """Write the XDMF sidecar (:mod:`jellysim.io.xdmf`) listing the frames flushed, whole
         or not at all. Unless ``force``, skipped while less than :data:`SIDECAR_PAUSE` times its
         last write's duration has passed since then, so rewriting a long run's sidecar takes at
-        most a twentieth of the run's time; :meth:`close` writes it last."""
-        if self._sidecar_frames == self.frames:
+        most a twentieth of the run's time; :meth:`close` writes it last. None of no frame:
+        ``vtkXdmfReader`` crashes (SIGSEGV) on a temporal collection without grids, and on a
+        document without collections."""
+        if self._sidecar_frames == self.frames or self.frames == 0:
             return
         now = time.monotonic()
         if not force and now - self._sidecar_at < SIDECAR_PAUSE * self._sidecar_seconds:

@@ -16,18 +16,22 @@ export names them (docs/exports.md):
 - ``fluid``: the fluid and tank particles (vertices; (x, y) in 2-D), ``velocity``,
   ``pressure``, ``number_density``, ``alive``, ``kind``.
 
-The writer (:class:`jellysim.io.result.ResultWriter`) writes the sidecar when it creates the
-file and again as frames are flushed, each time whole into a temporary file then renamed over
-the old one, so the sidecar on disk always opens and lists frames the result holds.
+The writer (:class:`jellysim.io.result.ResultWriter`) removes the old sidecar before its new
+file takes the name ``result.h5``, writes the sidecar once the file holds a frame (a document
+of no frame crashes ``vtkXdmfReader``), and again as frames are flushed,
+each time whole into a temporary file then renamed over the old one, so a sidecar on disk always
+opens and lists frames the ``result.h5`` beside it holds.
 ``jellysim export DIR --format xdmf`` writes one for a result written before sidecars.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from xml.sax.saxutils import escape
 
 import h5py
 import numpy as np
@@ -75,6 +79,11 @@ class _Part:
     static: str = ""
 
 
+def _attribute(value: str) -> str:
+    """``value`` as the text of an XML attribute in double quotes."""
+    return escape(value, {'"': "&quot;"})
+
+
 def _number_type(dtype: np.dtype) -> str:
     name, size = _NUMBER_TYPES[np.dtype(dtype)]
     return f'NumberType="{name}" Precision="{size}"'
@@ -87,7 +96,7 @@ def _heavy(f: h5py.File, reference: str, path: str) -> str:
     shape = " ".join(str(n) for n in ds.shape)
     return (
         f'<DataItem Dimensions="{shape}" {_number_type(ds.dtype)} Format="HDF">'
-        f"{reference}:/{path}</DataItem>"
+        f"{escape(f'{reference}:/{path}')}</DataItem>"
     )
 
 
@@ -130,13 +139,14 @@ def _connectivity(name: str, rows: np.ndarray) -> str:
     """A named connectivity table, inline (the Domain's; grids refer to it by name)."""
     values = " ".join(str(int(v)) for v in rows.ravel())
     return (
-        f'  <DataItem Name="{name}" Dimensions="{rows.shape[0]} {rows.shape[1]}" '
+        f'  <DataItem Name="{_attribute(name)}" Dimensions="{rows.shape[0]} {rows.shape[1]}" '
         f'NumberType="Int" Format="XML">{values}</DataItem>\n'
     )
 
 
 def _referenced(name: str) -> str:
-    return f'<DataItem Reference="XML">/Xdmf/Domain/DataItem[@Name="{name}"]</DataItem>'
+    path = escape(f'/Xdmf/Domain/DataItem[@Name="{name}"]')
+    return f'<DataItem Reference="XML">{path}</DataItem>'
 
 
 def _tentacle_parts(f: h5py.File) -> tuple[list[_Part], str]:
@@ -275,7 +285,7 @@ def _parts(f: h5py.File, reference: str) -> tuple[list[_Part], str]:
 
 def _grid(slab: _Slabs, part: _Part, dimensions: int, frame: int, time: float) -> str:
     lines = [
-        f'   <Grid Name="{part.name}" GridType="Uniform">',
+        f'   <Grid Name="{_attribute(part.name)}" GridType="Uniform">',
         f'    <Time Value="{time!r}"/>',
         f"    {part.topology}",
         f'    <Geometry GeometryType="{"XYZ" if dimensions == 3 else "XY"}">',
@@ -284,7 +294,8 @@ def _grid(slab: _Slabs, part: _Part, dimensions: int, frame: int, time: float) -
     ]
     for array in part.arrays:
         lines += [
-            f'    <Attribute Name="{array.name}" AttributeType="{array.kind}" Center="Node">',
+            f'    <Attribute Name="{_attribute(array.name)}" AttributeType="{array.kind}" '
+            'Center="Node">',
             f"    {slab(array.path, frame, part.rows)}",
             "    </Attribute>",
         ]
@@ -305,7 +316,8 @@ def xdmf_text(f: h5py.File, reference: str, frames: Sequence[int]) -> str:
         dimensions = f[part.position].shape[-1]
         grids = "\n".join(_grid(slab, part, dimensions, k, float(times[k])) for k in frames)
         collections.append(
-            f'  <Grid Name="{part.name}" GridType="Collection" CollectionType="Temporal">\n'
+            f'  <Grid Name="{_attribute(part.name)}" GridType="Collection" '
+            'CollectionType="Temporal">\n'
             f"{grids}\n  </Grid>\n"
         )
     return (
@@ -318,15 +330,28 @@ def xdmf_text(f: h5py.File, reference: str, frames: Sequence[int]) -> str:
     )
 
 
+def result_reference(result: Path, folder: Path) -> str:
+    """The name of the result at ``result`` in a sidecar in ``folder``: its relative path.
+    Raises ValueError for a path holding ':', which XDMF 2's ``FILE:/DATASET`` form does not
+    allow (``vtkXdmfReader`` reads ``../a:b/result.h5:/time`` as the file ``b/result.h5``)."""
+    reference = os.path.relpath(result.resolve(), folder.resolve())
+    if ":" in reference:
+        raise ValueError(f"XDMF cannot name a file whose path has a ':' ('{reference}')")
+    return reference
+
+
 def write_xdmf(f: h5py.File, result: Path, path: Path, frames: Sequence[int]) -> int:
     """Write to ``path`` the XDMF document of ``frames`` of ``f``, the result at ``result``
-    (named in the document by its path relative to ``path``'s folder), whole or not at all:
-    into a temporary file renamed over ``path``. Returns its size in bytes; raises OSError."""
-    reference = os.path.relpath(result.resolve(), path.parent.resolve())
-    text = xdmf_text(f, reference, frames).encode()
-    temporary = path.with_name(path.name + ".tmp")
+    (named in the document by its path relative to ``path``'s folder, :func:`result_reference`),
+    whole or not at all: into a temporary file of this write's own, renamed over ``path``, so
+    writers of the same sidecar (a run, an export) never share one. Returns its size in bytes;
+    raises ValueError for a result XDMF cannot name, OSError for a failed write."""
+    text = xdmf_text(f, result_reference(result, path.parent), frames).encode()
+    temporary = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+    out = open(temporary, "xb")  # noqa: SIM115 ("x": a file of this write's own, or an error)
     try:
-        temporary.write_bytes(text)
+        with out:
+            out.write(text)
         os.replace(temporary, path)
     except OSError:
         temporary.unlink(missing_ok=True)
