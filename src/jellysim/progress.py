@@ -11,7 +11,7 @@ import time
 from typing import Any, TextIO
 
 DELAY_ENV = "JELLYSIM_PROGRESS_DELAY"  # seconds before a bar appears, overriding each caller's
-LOG_STEPS = 10  # in a log, a line each time another tenth of the work is done,
+LOG_STEPS = 20  # in a log, a line each time another 5 % of the work is done,
 LOG_INTERVAL = 60.0  # and at least one a minute (seconds) while work goes on
 
 

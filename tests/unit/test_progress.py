@@ -43,7 +43,7 @@ def test_a_log_gets_whole_lines_never_carriage_returns(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """stderr that is not a terminal (a batch job's log, CI's): plain lines, the first at
-    once (no delay here), then one each tenth of the work, the last at the end."""
+    once (no delay here), then one each 5 % of the work, the last at the end."""
     monkeypatch.setenv(DELAY_ENV, "0")
     with progress(300, 0, False, "simulating") as bar:
         for _ in range(300):
@@ -54,7 +54,7 @@ def test_a_log_gets_whole_lines_never_carriage_returns(
     assert lines[0].startswith("simulating: 1/300 frames (0 %)")
     assert lines[-1].startswith("simulating: 300/300 frames (100 %)")
     assert [line.split(" frames")[0] for line in lines[1:]] == [
-        f"simulating: {n}/300" for n in range(30, 301, 30)
+        f"simulating: {n}/300" for n in range(15, 301, 15)
     ]
 
 
@@ -74,7 +74,7 @@ def test_a_log_line_every_interval_with_the_time_left(
         for _ in range(60):
             bar.update(1)
     lines = capsys.readouterr().err.splitlines()
-    # A line each tenth (50, 60, ... %) and one a minute between (frames 25 s apart); the rate
+    # A line each 5 % (45, 50, ... %) and one a minute between (frames 25 s apart); the rate
     # counts this run's frames only, 1 frame in 25 s.
     assert lines[0] == "rendering: 41/100 frames (41 %), 25 s, about 1475 s left"
     assert lines[1] == "rendering: 44/100 frames (44 %), 100 s, about 1400 s left"  # a minute on
