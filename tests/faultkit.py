@@ -3,6 +3,7 @@ the command line, a result's datasets compared bit for bit, and what a folder ho
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -122,12 +123,32 @@ def one_line(stderr: str) -> str:
     return lines[0]
 
 
+# A heavy data item of the sidecar: its declared dimensions, and the dataset it names.
+_HDF_ITEM = re.compile(r'<DataItem Dimensions="([\d ]+)"([^>]*Format="HDF">result\.h5:)(/[^<]+)<')
+
+
+def _as_written(text: str, listed: int) -> str:
+    """``text`` with every per-frame dataset's declared frame count set to ``listed``."""
+    per_frame = {field.path.lstrip("/") for field in fields.FIELDS if field.per_frame}
+
+    def held(match: re.Match[str]) -> str:
+        dims = match.group(1).split()
+        if match.group(3).lstrip("/") in per_frame:
+            dims[0] = str(listed)
+        return f'<DataItem Dimensions="{" ".join(dims)}"{match.group(2)}{match.group(3)}<'
+
+    return _HDF_ITEM.sub(held, text)
+
+
 def sidecar_frames(folder: Path) -> int | None:
     """Check the XDMF sidecar beside ``folder``'s result.h5 against the file, as it is now, and
     return how many frames it lists (None: no sidecar). Whenever it is there it must list a
     prefix of the frames result.h5 holds, at their times, and be the very document the writer
-    makes of result.h5 for those frames (so its hyperslabs fit the datasets' shapes); ParaView's
-    XDMF reader (VTK's ``vtkXdmfReader``) then reads its last time step's points."""
+    made of result.h5 when the file held those frames: the document of them today but for the
+    frame count each per-frame dataset is declared with (the file has grown since the writer's
+    last rewrite, which it spaces out: io/xdmf.py; its hyperslabs still fit, as the datasets only
+    grow along frames). ParaView's XDMF reader (VTK's ``vtkXdmfReader``) then reads its last time
+    step's points."""
     sidecar = folder / XDMF_FILE
     if not sidecar.exists():
         return None
@@ -141,9 +162,12 @@ def sidecar_frames(folder: Path) -> int | None:
     listed = list(times or ())
     frames = plain_frames(folder / "result.h5")
     assert len(listed) <= frames, f"{XDMF_FILE} lists {len(listed)} frames of {frames}"
+    text = sidecar.read_text()
     with h5py.File(folder / "result.h5", "r") as f:
         np.testing.assert_array_equal(listed, f[fields.TIME.path][: len(listed)])
-        assert sidecar.read_text() == xdmf_text(f, "result.h5", range(len(listed)))
+        expected = xdmf_text(f, "result.h5", range(len(listed)))
+    assert text == _as_written(text, len(listed)), "a per-frame dataset's declared frames"
+    assert text == _as_written(expected, len(listed))
     if listed:
         reader.UpdateTimeStep(listed[-1])
         assert reader.GetOutputDataObject(0).GetNumberOfPoints() > 0
