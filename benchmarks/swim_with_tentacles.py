@@ -8,7 +8,9 @@ By default at the tests' coarse scale (``tests/scenes.py`` SWIM: the weightless 
 l0 = 0.25 m, three 2 s pulses, ten marginal tentacles and the four oral arms); ``--full`` runs
 ``moon-jelly-weightless`` as it is (13-15 minutes a case on 2 cores). Prints per case the rise of
 the bell's centre in each pulse (m and bell diameters) and in all. ``--set`` applies to every
-case (e.g. ``fluid.courant=0.15``: another step sequence, to see what is round-off's).
+case (e.g. ``fluid.courant=0.15``: another step sequence, to see what is round-off's);
+``--case NAME`` runs only the named cases (the one-way cases cannot change the bell: they give
+the no-tentacle rise to the bit).
 """
 
 from __future__ import annotations
@@ -39,6 +41,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true")
     parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument(
+        "--case", dest="cases", action="append", choices=list(CASES),
+        help="run only this case (repeatable); default: all four",
+    )  # fmt: skip
     args = parser.parse_args()
     base: dict[str, object] = {} if args.full else {**scenes.SWIM, "tentacles.count": 10}
     base.update(parse_override(item) for item in args.overrides)
@@ -46,6 +52,8 @@ def main() -> None:
     print("| case | rise per pulse [m] | in diameters | total [m] | wall [s] |")
     print("| --- | --- | --- | ---: | ---: |")
     for name, overrides in CASES.items():
+        if args.cases and name not in args.cases:
+            continue
         tree: str | dict[str, object] = "moon-jelly-weightless"
         if overrides.get("tentacles.count") == 0:
             tree = scenes.one_table("moon-jelly-weightless")  # a bell with no tentacle group

@@ -361,6 +361,17 @@ def test_mixed_source_without_the_corrected_gradient_is_refused(tmp_path: Path) 
     )
 
 
+def test_conservative_gradient_with_the_surface_repulsion_is_refused(tmp_path: Path) -> None:
+    """The surface repulsion pushes one particle of a pair only, which would undo what the
+    conservative gradient conserves: refused before anything is written, naming both keys."""
+    gradient = "fluid.gradient=conservative"
+    check_subprocess(
+        tmp_path,
+        ("run", "hydrostatic-2d", "--set", "fluid.source=standard", "--set", gradient),
+        ("fluid.gradient = 'conservative'", "fluid.surface_repulsion"),
+    )
+
+
 def test_hexagonal_lattice_in_three_dimensions_is_refused(tmp_path: Path) -> None:
     """The hexagonal lattice is 2-D only: refused before anything is written."""
     check_subprocess(

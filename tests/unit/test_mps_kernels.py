@@ -334,6 +334,38 @@ def test_collision_conserves_momentum(dim: int) -> None:
     np.testing.assert_allclose(out_u.sum(axis=0), velocity.sum(axis=0), rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_conservative_gradient_conserves_momentum_and_the_standard_does_not(dim: int) -> None:
+    """Eq. (F10c) [Khayyer & Gotoh 2008]: each pair's coefficient (p_i + p_j) - (p_min,i +
+    p_min,j) is symmetric and r_j - r_i antisymmetric, so with only fluid particles (equal
+    masses) the pressure's impulses cancel pair by pair: sum_i u_i is unchanged to round-off.
+    The minimum-pressure gradient of Eq. (F10) weighs a pair by p_j - p_min,i from i's side and
+    p_i - p_min,j from j's: it changes the momentum, by far more than round-off."""
+    position, velocity, kind = blob(dim, 4)
+    rng = np.random.default_rng(5)
+    pressure = rng.uniform(0.0, 500.0, kind.shape[0])
+    solver = MPSSolver(MPSParameters(dim=dim, l0=0.01), position, kind)
+    nb = neighbours.Neighbours(
+        *neighbours.neighbour_list(position, solver.alive, solver.alive, solver.search_radius),
+        solver.search_radius,
+    )
+    dt = 1e-3
+    change = {}
+    for name, kernel in (
+        ("conservative", kernels.conservative_pressure_correction),
+        ("standard", kernels.pressure_correction),
+    ):
+        out_x = np.empty_like(position)
+        out_u = np.empty_like(velocity)
+        kernel(position, velocity, pressure, kind, solver.alive, nb, solver.constants, dt, out_x,
+               out_u)  # fmt: skip
+        assert np.abs(out_u - velocity).max() > 1e-3  # the pressure does act
+        np.testing.assert_allclose(out_x, position + dt * (out_u - velocity), rtol=0, atol=1e-15)
+        change[name] = np.abs((out_u - velocity).sum(axis=0)).max()
+    assert change["conservative"] < 1e-12
+    assert change["standard"] > 1e-3
+
+
 def test_tank_geometry() -> None:
     l0 = 0.01
     positions, kinds = tank(0.1, 0.05, l0, wall_layers=1, dummy_layers=2)

@@ -438,6 +438,12 @@ def _check_fluid(scene: Scene) -> None:
             "fluid.source = 'mixed' needs fluid.gradient = 'corrected': with the standard "
             "gradient the mixed source is unstable (docs/fluid.md)"
         )
+    if f.gradient == "conservative" and f.surface_repulsion:
+        raise InputError(
+            "fluid.gradient = 'conservative' cannot take fluid.surface_repulsion = true: the "
+            "repulsion pushes one particle of a pair only, so the momentum the gradient "
+            "conserves would not be; set one of them otherwise"
+        )
     if f.surface == "either-density" and f.source != "mixed":
         raise InputError(
             "fluid.surface = 'either-density' needs fluid.source = 'mixed' (it also tests "

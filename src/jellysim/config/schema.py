@@ -499,10 +499,12 @@ class Fluid:
     gradient: str = param(
         "standard",
         kind="choice",
-        choices=("standard", "corrected"),
+        choices=("standard", "corrected", "conservative"),
         doc="pressure gradient: 'standard', the minimum-pressure gradient (Koshizuka & Oka "
         "1996); 'corrected', times the inverse moment matrix of each particle's neighbourhood "
-        "(Khayyer & Gotoh 2011): a particle at a flat free surface carries its full weight",
+        "(Khayyer & Gotoh 2011): a particle at a flat free surface carries its full weight; "
+        "'conservative', pair-wise antisymmetric (Khayyer & Gotoh 2008): the pressure "
+        "conserves the water's momentum, not with surface_repulsion",
     )
     surface: str = param(
         "standard",

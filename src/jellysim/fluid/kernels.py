@@ -379,3 +379,61 @@ def pressure_correction(
             du = coefficient * gradient[k]
             out_velocity[i, k] += du
             out_position[i, k] += dt * du
+
+
+@njit(cache=True, parallel=True, fastmath=FAST)
+def conservative_pressure_correction(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    pressure: np.ndarray,
+    kind: np.ndarray,
+    alive: np.ndarray,
+    neighbours: Neighbours,
+    constants: Constants,
+    dt: float,
+    out_position: np.ndarray,
+    out_velocity: np.ndarray,
+) -> None:
+    """The pair-wise antisymmetric gradient, Eq. (F10c) [Khayyer & Gotoh 2008], and the
+    correction of fluid particles, Eq. (F13):
+
+    ``grad p_i = (D / n0) sum_j ((p_i + p_j) - (p_min,i + p_min,j)) / r_ij^2 (r_j - r_i) w``,
+    with ``p_min,i`` the least pressure among i and its fluid and wall neighbours within
+    r_e,grad (a particle without a neighbour-list row: its own pressure); dummies are ignored.
+    The coefficient of each pair is symmetric in i and j and ``r_j - r_i`` is not, so two fluid
+    particles (equal masses) receive equal and opposite impulses: the pressure leaves the
+    water's momentum unchanged but for what walls give it. ``u_i += -dt grad p_i / rho``,
+    ``r_i += dt`` times that change; other kinds are copied unchanged.
+    """
+    n, dim = position.shape
+    re = constants.re_gradient
+    coefficient = -dt * dim / (constants.n0_gradient * constants.density)
+    lowest = np.empty(n)
+    for i in prange(n):
+        for k in range(dim):
+            out_velocity[i, k] = velocity[i, k]
+            out_position[i, k] = position[i, k]
+        least = pressure[i]
+        if alive[i]:
+            for m in range(neighbours.start[i], neighbours.start[i + 1]):
+                j = neighbours.indices[m]
+                if neighbours.distance[m] < re and kind[j] != DUMMY and alive[j]:
+                    least = min(least, pressure[j])
+        lowest[i] = least
+    active = _fluid_rows(kind, alive)
+    for a in prange(active.shape[0]):
+        i = active[a]
+        gradient = np.zeros(dim)
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            j = neighbours.indices[m]
+            r = neighbours.distance[m]
+            if r >= re or kind[j] == DUMMY or not alive[j]:
+                continue
+            excess = (pressure[i] + pressure[j]) - (lowest[i] + lowest[j])
+            scale = excess / (r * r) * weight(r, re)
+            for k in range(dim):
+                gradient[k] += scale * (position[j, k] - position[i, k])
+        for k in range(dim):
+            du = coefficient * gradient[k]
+            out_velocity[i, k] += du
+            out_position[i, k] += dt * du

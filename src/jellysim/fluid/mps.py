@@ -10,6 +10,9 @@ References
 - Khayyer, A. & Gotoh, H. (2011). Enhancement of stability and accuracy of the moving particle
   semi-implicit method. J. Comput. Phys. 230, 3093-3118. The corrected pressure gradient
   (``gradient="corrected"``, Eq. F10a).
+- Khayyer, A. & Gotoh, H. (2008). Development of CMPS method for accurate water-surface
+  tracking in breaking waves. Coast. Eng. J. 50, 179-207. The pair-wise antisymmetric,
+  momentum-conserving gradient (``gradient="conservative"``, Eq. F10c).
 - Ikeda, H., Koshizuka, S., Oka, Y. et al. (2001). Numerical analysis of jet injection behavior
   for fuel-coolant interaction using particle method. J. Nucl. Sci. Technol. 38, 174-182. The
   compressibility term of the pressure Poisson equation.
@@ -43,7 +46,7 @@ from jellysim.fluid.solvers import PRESSURE_SOLVERS, CoarseSpace, FluidDiverged,
 
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count", "either-density")
-GRADIENTS = ("standard", "corrected")
+GRADIENTS = ("standard", "corrected", "conservative")
 # beta of the surface criterion n < beta n0 when none is given, per lattice. 0.97 is Koshizuka &
 # Oka's for the square lattice, whose second row under a flat surface has n = 0.992 n0 (it misses
 # the neighbour two spacings up). On the hexagonal lattice the second row misses three (one at
@@ -85,7 +88,11 @@ class MPSParameters:
       carries its full weight (the standard gradient balances half), and one-sided
       neighbourhoods at walls are compensated but for the minimum-pressure term. The mixed
       source needs it: with the standard gradient the mixed source's dam break blows up
-      (docs/fluid.md).
+      (docs/fluid.md). "conservative": the pair-wise antisymmetric gradient of Eq. (F10c)
+      [Khayyer & Gotoh 2008], ``(p_i + p_j) - (p_min,i + p_min,j)`` in place of
+      ``p_j - p_min,i``: two fluid particles push each other equally and oppositely, so the
+      pressure conserves the water's momentum (with walls, but for what they give). Not with
+      ``surface_repulsion``, which pushes one particle of a pair only.
     - ``collision_distance`` (l0) and ``collision_restitution``: the collision model, Eq. (F6).
       The customary 0.5 l0 lets a surge's tip particle sink to about 0.65 l0 above a floor
       particle, whose PPE row (its neighbours nearly all on the free surface) then throws it off
@@ -168,6 +175,8 @@ class MPSParameters:
         if self.surface == "either-density" and self.source != "mixed":
             # n^k is computed (for every fluid and wall particle) by the mixed source only
             raise ValueError("surface = 'either-density' needs source = 'mixed'")
+        if self.gradient == "conservative" and self.surface_repulsion:
+            raise ValueError("gradient = 'conservative' cannot take surface_repulsion")
         if self.acceleration_number is not None and not self.acceleration_number > 0.0:
             raise ValueError(f"acceleration_number must be > 0, not {self.acceleration_number}")
         if self.gravity is not None and len(self.gravity) != self.dim:
@@ -540,9 +549,17 @@ class MPSSolver:
         return iterations, residual, ic_shift
 
     def _correct(self, dt: float, system: PoissonSystem) -> None:
-        """The pressure gradient, Eq. (F10) or (F10a) (and (F10b) with ``surface_repulsion``),
-        and the velocity and position correction, Eq. (F13), in place."""
+        """The pressure gradient, Eq. (F10), (F10a) or (F10c) (and (F10b) with
+        ``surface_repulsion``), and the velocity and position correction, Eq. (F13), in place."""
         p = self.params
+        if p.gradient == "conservative":
+            kernels.conservative_pressure_correction(
+                self.position, self.velocity, self.pressure, self.kind, self.alive,
+                system.neighbours, self.constants, dt, self._position, self._velocity,
+            )  # fmt: skip
+            self.position[:] = self._position
+            self.velocity[:] = self._velocity
+            return
         surface = (  # the fluid particles on the free surface, for Eq. (F10b)
             self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None
         )
