@@ -2,12 +2,14 @@
 "Motion that reads on screen"): the table in docs/figures.md.
 
     python benchmarks/motion_report.py [PRESET ...] [--set KEY=VALUE ...] [--out DIR]
+    python benchmarks/motion_report.py --read RUN_DIR [--read RUN_DIR ...]
 
 Runs each preset with its own defaults (the whole duration; the moon-jelly presets take 10-15
 minutes each on 2 cores) and prints one Markdown row per preset and tentacle group, from
 :func:`jellysim.io.motion.motion_by_group` over the second half of the run (a one-table preset
 has one group, "tentacles"). A lag of "-" is a group whose roots do not move sideways relative
-to the bell (no root motion to follow: coherence 0).
+to the bell (no root motion to follow: coherence 0). ``--read`` measures finished runs instead
+(their "run" column is "-").
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ def main() -> None:
     parser.add_argument("presets", nargs="*", default=list(JELLYFISH))
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--out", default="out/motion-report")
+    parser.add_argument("--read", action="append", default=[], help="a finished run's folder")
     args = parser.parse_args()
     columns = (
         "preset",
@@ -48,20 +51,24 @@ def main() -> None:
     )
     print("| " + " | ".join(columns) + " |")
     print("|" + " --- |" * len(columns))
-    for preset in args.presets:
+    for preset in args.read or args.presets:
         start = time.perf_counter()
-        with jellysim.run(
-            preset, Path(args.out) / preset, overrides=args.overrides or None, force=True
-        ) as r:
+        if args.read:
+            opened = jellysim.open_result(preset)
+        else:
+            opened = jellysim.run(
+                preset, Path(args.out) / preset, overrides=args.overrides or None, force=True
+            )
+        with opened as r:
             motions = motion_by_group(r)
             counts = {name: r.group_tentacles(name).size for name in motions}
-        took = time.perf_counter() - start
+        took = "-" if args.read else f"{time.perf_counter() - start:.0f} s"
         for name, m in motions.items():
             lag = f"{m.lag:.3g} s of {m.period:.3g} s" if m.coherence > 0.0 else "-"
             print(
                 f"| `{preset}` | {name} | {counts[name]} | {m.start:.3g}-{m.end:.3g} s | "
                 f"{m.chord:.3f} | {100 * m.bend:.1f} %, {100 * m.bend_peak:.1f} % | {lag} | "
-                f"{m.coherence:.2f} | {took:.0f} s |",
+                f"{m.coherence:.2f} | {took} |",
                 flush=True,
             )
 
