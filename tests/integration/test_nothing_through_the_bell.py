@@ -141,3 +141,22 @@ def test_no_tentacle_through_a_soft_bell(name: str, tmp_path: Path) -> None:
             overrides[f"tentacles.{group.name}.{key}"] = getattr(ours, key)
     with jellysim.run(name, tmp_path, overrides=overrides) as result:
         assert_nothing_inside(result)
+
+
+@pytest.mark.parametrize("name", SOFT)
+def test_soft_bell_tentacles_start_outside_the_bell_at_the_presets_own_scale(name: str) -> None:
+    """The runs above are at the test scale; at each preset's own resolution the tentacles'
+    first particles lie a spacing or less below their roots, closer than the half lattice
+    spacing by which the drawn tissue reaches below the lowest particle layer. With the roots
+    at that layer (``bell.root_placement = "particles"``, before issue 25) 4 particles of
+    moon-jelly's and 20 of moon-jelly-real-size's started inside the wall; on the drawn
+    surface's underside none does."""
+    from jellysim.simulation.soft import SoftBellSimulation
+
+    simulation = SoftBellSimulation(jellysim.load_scene(name))
+    assert simulation.tentacles is not None
+    points = np.concatenate(
+        [group.positions[:, 1:].reshape(-1, 3) for group in simulation.tentacles.groups]
+    )
+    skin = simulation.coupling.skin
+    assert not inside_closed_surface(points, skin.rest_surface, skin.faces).any()

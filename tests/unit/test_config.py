@@ -260,3 +260,21 @@ def test_colors_read_as_hex_or_rgb(value: object, expected: tuple[float, float, 
 def test_bad_colors_are_refused(value: object) -> None:
     with pytest.raises(InputError, match="look.bell_color"):
         load_scene("brown-jelly", {"look.bell_color": value})
+
+
+def test_a_recorded_soft_bell_without_root_placement_hung_its_roots_from_the_particles() -> None:
+    """Scene texts written before ``bell.root_placement`` (issue 25) are read as the runs that
+    wrote them ran: a mass-spring bell's roots at its particles, not the new "surface" default;
+    a kinematic bell's text is left alone (the key does nothing there), and a recorded key is
+    kept."""
+    from jellysim.config.load import recorded_tree, same_scene
+
+    soft = load_scene("moon-jelly")
+    text = scene_to_toml(soft)
+    assert 'root_placement = "surface"' in text
+    old = text.replace('root_placement = "surface"\n', "")
+    assert scene_from_tree(recorded_tree(old)).bell.root_placement == "particles"
+    assert scene_from_tree(recorded_tree(text)).bell.root_placement == "surface"
+    assert not same_scene(old, text)
+    kinematic = scene_to_toml(load_scene("brown-jelly"))
+    assert same_scene(kinematic.replace('root_placement = "surface"\n', ""), kinematic)

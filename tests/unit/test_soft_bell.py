@@ -14,7 +14,7 @@ from jellysim.bell.skin import BellSkin
 from jellysim.bell.soft import CIRCUMFERENTIAL, SPRING_SAFETY, SoftBell
 from jellysim.bell.swimming import phase_lag
 from jellysim.coupling.bell_in_fluid import BellInFluid
-from jellysim.coupling.margin import RecordedMargin
+from jellysim.coupling.margin import RecordedMargin, depth_inside
 from jellysim.fluid.geometry import FLUID
 from jellysim.fluid.setup import fluid_particles
 
@@ -153,7 +153,34 @@ def test_roots_sit_on_the_margin_and_hang_down_at_rest(
     rho = np.hypot(relative[:, 0], relative[:, 1])
     w = scene.bell.thickness * scene.bell.height
     assert np.all((rho > scene.bell.radius - w - L0) & (rho < scene.bell.radius))
-    np.testing.assert_array_equal(margin.margin(0.0)[:: margin.root_every], roots[0])
+    # Each root is its margin sample dropped along -z onto the underside of the drawn surface:
+    # the lowest particle layer lies half a spacing inside the tissue (issue 25).
+    samples = margin.margin(0.0)[:: margin.root_every]
+    drop = margin.drop[:: margin.root_every]
+    assert np.all((drop > 0.0) & (drop < L0))
+    np.testing.assert_allclose(roots[0], samples - drop[:, None] * [0.0, 0.0, 1.0], atol=1e-15)
+
+
+def test_roots_start_on_the_underside_of_the_drawn_bell(
+    margin: RecordedMargin, skin: BellSkin
+) -> None:
+    """A point just above a root is in the bell's tissue, the root itself and a point just
+    below it are not: the tentacle hangs from the surface, not from inside the wall."""
+    roots = margin.roots(np.array([0.0]))[0][0]
+    up = np.array([0.0, 0.0, 1e-6 * L0])
+    vertices, faces = skin.rest_surface, skin.faces
+    assert np.all(depth_inside(roots + 100 * up, vertices, faces) > 0.0)
+    np.testing.assert_allclose(depth_inside(roots + up, vertices, faces), 1e-6 * L0, rtol=1e-3)
+    np.testing.assert_array_equal(depth_inside(roots - up, vertices, faces), 0.0)
+
+
+def test_depth_inside_a_closed_surface() -> None:
+    """The depth below a point down to the surface, for points inside a unit cube; 0 outside."""
+    corners = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    points = np.array([[0.3, 0.6, 0.25], [0.5, 0.5, 0.9], [0.5, 0.5, 1.5], [1.5, 0.5, 0.5]])
+    np.testing.assert_allclose(depth_inside(points, corners, faces), [0.25, 0.9, 0.0, 0.0])
 
 
 def test_roots_between_frames_are_c1_hermite(scene: jellysim.Scene) -> None:

@@ -651,11 +651,18 @@ def recorded_tree(text: str) -> Tree:
     """The tree of a scene text that a result or a checkpoint recorded, read as the run that
     wrote it ran: a text without ``flow.model`` predates the key (issue 26; every text written
     since records every key), and the one flow then was the paper's, "bell" (not the "auto"
-    default, which gives a soft bell in MPS water the simulated water)."""
+    default, which gives a soft bell in MPS water the simulated water); one with a mass-spring
+    bell but no ``bell.root_placement`` hung its tentacles from its particles ("particles",
+    issue 25)."""
     tree = tomllib.loads(text)
     flow = tree.get("flow")
     if flow is None or (isinstance(flow, dict) and "model" not in flow):
         tree["flow"] = {**(flow or {}), "model": "bell"}
+    bell = tree.get("bell")
+    soft = isinstance(bell, dict) and bell.get("model") == "mass-spring"
+    if soft and isinstance(bell, dict) and "root_placement" not in bell:
+        # issue 25: before the key, a soft bell's roots hung from its particles
+        tree["bell"] = {**bell, "root_placement": "particles"}
     return tree
 
 
@@ -664,7 +671,8 @@ def same_scene(first: str, second: str) -> bool:
     under today's schema: a key that one text lacks takes its default. A key added to jellysim
     later is written into every new text at its default, which keeps the older behaviour; that
     changes the text, not the scene (docs/decisions.md, "Slender drag and currents"), except
-    ``flow.model``, whose default is no longer what older texts ran (:func:`recorded_tree`). A
+    ``flow.model`` and ``bell.root_placement``, whose defaults are no longer what older texts
+    ran (:func:`recorded_tree`). A
     text that does not read as a scene is no match."""
     if first == second:
         return True

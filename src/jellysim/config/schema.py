@@ -420,6 +420,15 @@ class Bell:
         "backward Euler ('implicit', Baraff & Witkin 1998; the fluid's limits alone set the "
         "step)",
     )
+    root_placement: str = param(
+        "surface",
+        kind="choice",
+        choices=("surface", "particles"),
+        doc="mass-spring: where the marginal tentacles hang from: 'surface', the underside of "
+        "the drawn bell, so that no tentacle starts inside its wall (issue 25); 'particles', the "
+        "mean of the lowest particle layer, half a spacing inside the drawn tissue (the paper's "
+        "§4.2.4; what runs before the key had)",
+    )
     muscle_band: float = param(
         0.3,
         gt=0.0,

@@ -7,6 +7,12 @@ and driven between frames by cubic Hermite interpolation (C1 in time). The clamp
 rest, turns with the wall: with the mean of the third layer up, the meridian angle of (root -
 upper point) is tracked. :class:`RecordedMargin` is the tentacles' root driver
 (:class:`jellysim.tentacle.roots.RootDriver`).
+
+The lowest layer's particles sit half a spacing inside the tissue that the skin draws (Eq. B12),
+so a root at their mean would start its tentacle inside the bell's wall. Each margin root is
+therefore moved along its clamp direction by ``drop``, the rest depth of its margin sample
+inside the drawn surface (:func:`depth_inside`): at rest it sits on the underside of the drawn
+margin, and the drop turns with the wall (issue 25: no tentacle through the bell).
 """
 
 from __future__ import annotations
@@ -43,7 +49,9 @@ class RecordedMargin:
     is interpolated linearly in angle between the two samples about it, and a mouth root (oral
     arms) sits on its circle about the margin's centre in the margin plane, moving with the
     margin's mean velocity and hanging along -z. Frames are ``frame_dt`` (s) apart;
-    ``forcing`` is the bell's (the scales of its pulse, for the tentacles' substep)."""
+    ``forcing`` is the bell's (the scales of its pulse, for the tentacles' substep); ``drop``
+    (R,) m per sample, or None for none: how far a margin root lies along its clamp direction
+    from the margin sample it is taken from (the module's docstring)."""
 
     def __init__(
         self,
@@ -54,6 +62,7 @@ class RecordedMargin:
         layout: RootLayout,
         frame_dt: float,
         forcing: Forcing,
+        drop: np.ndarray | None = None,
     ) -> None:
         self.sectors = sectors
         self.sample_angles = 2.0 * np.pi * np.arange(sectors) / sectors
@@ -70,9 +79,18 @@ class RecordedMargin:
             rho, angle, (height >= 2 * l0) & (height < 3 * l0), sigma
         )
         self.rest_margin = self._margin_weights @ rest
+        self.drop = np.zeros(sectors) if drop is None else np.asarray(drop, dtype=np.float64)
+        self._rest_positions = rest
         self._rest_meridian = self._meridian_angles(rest)
         self.records: dict[int, Record] = {}
         self.record(0, rest, np.zeros_like(rest))
+
+    def set_drop(self, drop: np.ndarray) -> None:
+        """Move the margin roots by ``drop`` (R,) m along their clamp directions (the module's
+        docstring), and record the rest frame again with it."""
+        self.drop = np.asarray(drop, dtype=np.float64)
+        rest = self._rest_positions
+        self.restart(0, rest, np.zeros_like(rest))
 
     def _ring_weights(
         self, rho: np.ndarray, angle: np.ndarray, layer: np.ndarray, sigma: float
@@ -110,13 +128,14 @@ class RecordedMargin:
         radial /= np.linalg.norm(radial, axis=1)[:, None]
         directions = np.sin(turn)[:, None] * radial
         directions[:, 2] -= np.cos(turn)
+        bases = margin + self.drop[:, None] * directions if self.drop.any() else margin
         if self.root_every or not self.tentacles:
             take = slice(0, None, self.root_every) if self.tentacles else slice(0, 0)
-            roots, root_velocities = margin[take], margin_velocity[take]
+            roots, root_velocities = bases[take], margin_velocity[take]
             root_directions = directions[take]
         else:
             roots, root_velocities, root_directions = self._placed(
-                margin, margin_velocity, directions
+                bases, margin, margin_velocity, directions
             )
         self.records[frame] = Record(
             roots,
@@ -129,9 +148,15 @@ class RecordedMargin:
             del self.records[old]
 
     def _placed(
-        self, margin: np.ndarray, velocity: np.ndarray, directions: np.ndarray
+        self,
+        bases: np.ndarray,
+        margin: np.ndarray,
+        velocity: np.ndarray,
+        directions: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Roots, their velocities and clamp directions (T, 3) at the layout's places.
+        """Roots, their velocities and clamp directions (T, 3) at the layout's places: margin
+        roots between the samples' ``bases`` (the margin moved by the drop), mouth roots about
+        the ``margin``'s centre.
 
         A root whose angle falls on a sample (within 1e-9 of the sample step, as the even
         margin roots do) takes that sample itself, as one default group does: a group's roots
@@ -144,7 +169,7 @@ class RecordedMargin:
         j = below.astype(np.int64) % self.sectors
         w = np.where(on_sample, 0.0, x - below)[:, None]
         k = (j + 1) % self.sectors
-        roots = (1.0 - w) * margin[j] + w * margin[k]
+        roots = (1.0 - w) * bases[j] + w * bases[k]
         root_velocities = (1.0 - w) * velocity[j] + w * velocity[k]
         d = (1.0 - w) * directions[j] + w * directions[k]
         root_directions = np.where(
@@ -228,3 +253,28 @@ def _hermite(s: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
 def _ring_radius(ring: np.ndarray) -> float:
     relative = ring - ring.mean(axis=0)
     return float(np.hypot(relative[:, 0], relative[:, 1]).mean())
+
+
+def depth_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """How far each point (N, 3) m lies inside the closed triangle surface (``vertices`` (V, 3),
+    ``faces`` (F, 3)) straight below it: the distance down to the nearest crossing of the surface
+    under the point when the point is inside (an odd number of crossings above it), else 0."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    v0, v1 = (b - a)[:, :2], (c - a)[:, :2]
+    det = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
+    usable = np.abs(det) > 1e-300
+    a, b, c, v0, v1, det = a[usable], b[usable], c[usable], v0[usable], v1[usable], det[usable]
+    out = np.zeros(len(points))
+    # a ray exactly along a mesh edge would cross its two triangles twice or not at all: look
+    # a few 1e-9 of the surface's size aside
+    nudge = np.array([1.37e-9, 2.71e-9]) * float(np.ptp(vertices, axis=0).max())
+    for n, p in enumerate(np.asarray(points, dtype=np.float64)):
+        q = p[:2] + nudge - a[:, :2]
+        s = (q[:, 0] * v1[:, 1] - q[:, 1] * v1[:, 0]) / det
+        t = (v0[:, 0] * q[:, 1] - v0[:, 1] * q[:, 0]) / det
+        hit = (s >= 0.0) & (t >= 0.0) & (s + t <= 1.0)
+        z = a[hit, 2] + s[hit] * (b - a)[hit, 2] + t[hit] * (c - a)[hit, 2]
+        above, below = z[z > p[2]], z[z <= p[2]]
+        if len(above) % 2 == 1 and len(below):
+            out[n] = p[2] - below.max()
+    return out
