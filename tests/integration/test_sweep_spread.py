@@ -257,7 +257,11 @@ def test_a_killed_sweep_keeps_its_finished_points_and_resumes_the_others(
     ]
     before, resumed, ran = counts
     # A point may finish between the last look and the kill: at least those seen finished.
-    assert before >= len(kept) and resumed >= 1 and before + resumed + ran == 4, summary
+    assert before >= len(kept) and before + resumed + ran == 4, summary
+    # The point caught part way resumes from its checkpoint; on a Dask cluster the kill ends
+    # the sweep's client, not the workers, so that point may instead have finished on the
+    # cluster before the sweep starts again (seen in CI: 2 finished before, 0 resumed).
+    assert resumed >= 1 or (where == "dask" and before > len(kept)), summary
     for name, stamp in kept.items():  # not run again
         result = tmp_path / "killed" / POINTS_FOLDER / name / "result.h5"
         assert result.stat().st_ino + result.stat().st_mtime_ns == stamp
