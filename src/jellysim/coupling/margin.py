@@ -49,9 +49,9 @@ class RecordedMargin:
     is interpolated linearly in angle between the two samples about it, and a mouth root (oral
     arms) sits on its circle about the margin's centre in the margin plane, moving with the
     margin's mean velocity and hanging along -z. Frames are ``frame_dt`` (s) apart;
-    ``forcing`` is the bell's (the scales of its pulse, for the tentacles' substep); ``drop``
-    (R,) m per sample, or None for none: how far a margin root lies along its clamp direction
-    from the margin sample it is taken from (the module's docstring)."""
+    ``forcing`` is the bell's (the scales of its pulse, for the tentacles' substep). ``drop``
+    (R,) m per sample, zero until :meth:`set_drop`: how far a margin root lies along its clamp
+    direction from the margin sample it is taken from (the module's docstring)."""
 
     def __init__(
         self,
@@ -62,7 +62,6 @@ class RecordedMargin:
         layout: RootLayout,
         frame_dt: float,
         forcing: Forcing,
-        drop: np.ndarray | None = None,
     ) -> None:
         self.sectors = sectors
         self.sample_angles = 2.0 * np.pi * np.arange(sectors) / sectors
@@ -79,7 +78,7 @@ class RecordedMargin:
             rho, angle, (height >= 2 * l0) & (height < 3 * l0), sigma
         )
         self.rest_margin = self._margin_weights @ rest
-        self.drop = np.zeros(sectors) if drop is None else np.asarray(drop, dtype=np.float64)
+        self.drop = np.zeros(sectors)
         self._rest_positions = rest
         self._rest_meridian = self._meridian_angles(rest)
         self.records: dict[int, Record] = {}
