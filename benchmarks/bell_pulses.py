@@ -6,10 +6,11 @@ spring stiffness (issue 26; the table in docs/soft-bell.md, "A bell that pulses"
 
 For each factor F the springs are F x 31.25 N/m (the paper's k = 20 N/m at l0 = 0.16 m, scaled to
 this spacing); printed per pulse: the peak contraction, the lowest contraction after it within
-the pulse, and the rise of the bell's centre. The preset's factor is 64.
+the pulse, and the rise of the bell's centre; the muscle is the preset's. The preset's factor is 16.
 
-``--full`` runs the ``moon-jelly`` preset itself (l0 = 0.16 m, its 1280 N/m springs, five 2 s
-pulses; about 25 minutes on 2 cores) and ignores the factors.
+``--full`` runs the ``moon-jelly`` preset itself (l0 = 0.16 m, its 320 N/m springs, five 2 s
+pulses; 35-65 minutes on 2 cores) and ignores the factors; ``--set KEY=VALUE`` (repeatable)
+changes a key of it as ``jellysim run --set`` does, e.g. ``--set bell.spring_stiffness=320``.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -32,12 +34,16 @@ PAPER_K_COARSE = 31.25  # N/m: 20 N/m x 0.25 / 0.16
 PERIOD = 2.0  # s, the moon-jelly preset's pulse
 
 
-def pulses(factor: float | None, out: Path) -> list[tuple[float, float, float]]:
+def pulses(
+    factor: float | None, out: Path, changes: dict[str, object] | None = None
+) -> list[tuple[float, float, float]]:
     """(peak, lowest after it, rise in m) for each pulse of the run at ``factor`` (None: the
-    ``moon-jelly`` preset as it is)."""
-    overrides: dict[str, object] = {"duration": PULSES * PERIOD}
+    ``moon-jelly`` preset as it is, with ``changes``)."""
+    overrides: dict[str, object] = {"duration": PULSES * PERIOD, **(changes or {})}
     if factor is not None:
-        overrides.update(SWIM, duration=PULSES * SWIM_PERIOD)
+        # SWIM's material is the paper's; the factor sets the springs, the preset the muscle
+        coarse = {k: v for k, v in SWIM.items() if not k.startswith("bell.muscle_")}
+        overrides.update(coarse, duration=PULSES * SWIM_PERIOD)
         overrides["bell.spring_stiffness"] = PAPER_K_COARSE * factor
     period = PERIOD if factor is None else SWIM_PERIOD
     with jellysim.run("moon-jelly", out, overrides=overrides, force=True) as result:
@@ -64,14 +70,19 @@ def main() -> None:
     parser.add_argument("factors", nargs="*", type=float, default=[1.0, 16.0, 64.0, 256.0])
     parser.add_argument("--out", default="out/bell-pulses")
     parser.add_argument("--full", action="store_true")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
+    changes: dict[str, object] = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        changes[key.strip()] = tomllib.loads(f"v = {value}")["v"]
     factors: list[float | None] = [None] if args.full else list(args.factors)
     for factor in factors:
         start = time.perf_counter()
         name = "full" if factor is None else f"k{factor:g}"
-        rows = pulses(factor, Path(args.out) / name)
+        rows = pulses(factor, Path(args.out) / name, changes if factor is None else None)
         label = (
-            "moon-jelly as it is"
+            ("moon-jelly as it is" + "".join(f", {item}" for item in args.set))
             if factor is None
             else (f"factor {factor:g} (k = {PAPER_K_COARSE * factor:g} N/m)")
         )

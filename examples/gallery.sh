@@ -5,8 +5,8 @@
 #   examples/gallery.sh [OUT] [PRESET ...]   (default OUT: out/gallery; default: every preset)
 # The stills and clips are copied to docs/gallery/ (small files: 640x480 PNG, 320x240 MP4).
 # Times on 2 cores: the kinematic-bell presets a minute or two each; the soft-bell (Case 2)
-# presets run their first 0.5 s (a quarter of moon-jelly's pulse, half of the real-size bell's),
-# a minute or two each: their full three pulses take 13 minutes and more.
+# presets run their first 0.5 s (half of the real-size bell's contraction; moon-jelly 0.8 s, to
+# its first contraction's peak), a few minutes each: their full runs take 13 minutes and more.
 set -euo pipefail
 out=${1:-out/gallery}
 shift || true
@@ -17,15 +17,15 @@ mkdir -p "$docs"
 # preset: simulated seconds, the still's frame, the clip's frames (A:B)
 declare -A duration=(
   [brown-jelly]=6 [purple-jelly]=6 [lions-mane]=10
-  [moon-jelly]=0.5 [moon-jelly-weightless]=0.5 [moon-jelly-real-size]=0.5
+  [moon-jelly]=0.8 [moon-jelly-weightless]=0.5 [moon-jelly-real-size]=0.5
 )
 declare -A still=(
   [brown-jelly]=150 [purple-jelly]=150 [lions-mane]=270
-  [moon-jelly]=10 [moon-jelly-weightless]=10 [moon-jelly-real-size]=10
+  [moon-jelly]=16 [moon-jelly-weightless]=10 [moon-jelly-real-size]=10
 )
 declare -A clip=(
   [brown-jelly]=90:181 [purple-jelly]=90:181 [lions-mane]=210:301
-  [moon-jelly]=0:11 [moon-jelly-weightless]=0:11 [moon-jelly-real-size]=0:11
+  [moon-jelly]=0:17 [moon-jelly-weightless]=0:11 [moon-jelly-real-size]=0:11
 )
 presets=("$@")
 if [ ${#presets[@]} -eq 0 ]; then

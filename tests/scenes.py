@@ -5,8 +5,9 @@ wide and 5 l0 tall (448 particles) in a 22 x 22 x 18 l0 tank filled 15 l0 deep. 
 duration, frame rate, tentacles and material they need.
 
 ``SWIM``: SMALL_MOON for three 2 s pulses (``SWIM_PERIOD``) at 10 frames a second with two
-marginal tentacles (and the preset's four oral arms) and k = 31.25 N/m (20 N/m x 0.25 / 0.16,
-the preset's material at this spacing); ``MUSCLE_OFF`` the muscle neither contracting nor
+marginal tentacles (and the preset's four oral arms), k = 31.25 N/m (20 N/m x 0.25 / 0.16,
+the paper's material at this spacing) and the paper's uniform muscle band (0.3 of the height, no
+taper: the preset's until issue 26); ``MUSCLE_OFF`` the muscle neither contracting nor
 stiffening, ``SWIM_OFF`` SWIM with it.
 
 ``one_table(preset)``: a grouped preset's tree with its tentacles as one ``[tentacles]`` table of
@@ -48,6 +49,8 @@ SWIM: dict[str, object] = {
     "fps": 10.0,
     "tentacles.count": 2,
     "bell.spring_stiffness": 31.25,
+    "bell.muscle_band": 0.3,
+    "bell.muscle_taper": 0.0,
     "bell.period": SWIM_PERIOD,
 }
 MUSCLE_OFF: dict[str, object] = {"bell.muscle_ratio": 0.0, "bell.muscle_stiffening": 1.0}

@@ -50,15 +50,17 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
         {**_MOON_SHORT, "bell.spring_integration": "implicit", "tentacles.count": 3},
     ),
     # The paper's soft bell in the paper's assumed flow: moon-jelly as it was before issue 26
-    # (its tentacles feel the simulated water since, and its bell is 64 times stiffer) and
-    # before its roots moved onto the drawn surface (issue 25); this reference is the moon-jelly
-    # one stored before those changes.
+    # (its tentacles feel the simulated water since, and its bell is 16 times stiffer with a
+    # tapered muscle in a wider band) and before its roots moved onto the drawn surface (issue
+    # 25); this reference is the moon-jelly one stored before those changes.
     "moon-jelly-paper-flow": (
         "moon-jelly",
         {
             **_MOON_SHORT,
             "flow.model": "bell",
             "bell.spring_stiffness": 20.0,
+            "bell.muscle_band": 0.3,
+            "bell.muscle_taper": 0.0,
             "bell.root_placement": "particles",
         },
     ),

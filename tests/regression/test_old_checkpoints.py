@@ -55,6 +55,8 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
             **scenes.SMALL_MOON,
             "flow.model": "bell",
             "bell.spring_stiffness": 20.0,  # the paper's k, the preset's until issue 26
+            "bell.muscle_band": 0.3,  # the paper's uniform muscle band, until issue 26
+            "bell.muscle_taper": 0.0,
             "bell.root_placement": "particles",  # the roots at the particles, until issue 25
             "duration": 0.4,
             "fps": 10.0,

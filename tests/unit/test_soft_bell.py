@@ -87,15 +87,21 @@ def test_muscle_springs_run_around_the_margin_band(scene: jellysim.Scene, bell: 
     assert np.all(np.abs(np.einsum("ij,ij->i", direction, theta)) >= CIRCUMFERENTIAL - 1e-12)
 
 
-def _reference_forces(bell: SoftBell, positions: np.ndarray, time: float) -> np.ndarray:
-    """Paper Eq. 6 summed pair by pair, with the muscle's rest length and stiffness (Eq. B9)."""
+def _reference_forces(
+    bell: SoftBell, positions: np.ndarray, time: float, b: jellysim.Scene
+) -> np.ndarray:
+    """Paper Eq. 6 summed pair by pair, with the muscle's rest length and stiffness (Eq. B9,
+    tapered by Eq. B9t as the scene ``b`` says)."""
     a = bell.activation(time)
+    band = b.bell.muscle_band * b.bell.height
     forces = np.zeros_like(positions)
     for (i, j), rest, muscle in zip(
         bell.springs.pairs, bell.springs.rest_length, bell.springs.muscle, strict=True
     ):
-        k = bell.stiffness * (1.0 + (bell.muscle_stiffening - 1.0) * a if muscle else 1.0)
-        length0 = rest * (1.0 - bell.muscle_ratio * a if muscle else 1.0)
+        height = 0.5 * (bell.rest[i, 2] + bell.rest[j, 2]) - bell.shape.centre[2]
+        w = min(max(1.0 - b.bell.muscle_taper * height / band, 0.0), 1.0)
+        k = bell.stiffness * (1.0 + (bell.muscle_stiffening - 1.0) * a * w if muscle else 1.0)
+        length0 = rest * (1.0 - bell.muscle_ratio * a * w if muscle else 1.0)
         r = positions[i] - positions[j]
         force = -k * (np.linalg.norm(r) - length0) * r / np.linalg.norm(r)
         forces[i] += force
@@ -104,18 +110,64 @@ def _reference_forces(bell: SoftBell, positions: np.ndarray, time: float) -> np.
 
 
 @pytest.mark.parametrize("time", [0.0, 0.3, 0.6, 1.4])
-def test_spring_forces_match_hookes_law_and_sum_to_zero(bell: SoftBell, time: float) -> None:
+def test_spring_forces_match_hookes_law_and_sum_to_zero(
+    scene: jellysim.Scene, bell: SoftBell, time: float
+) -> None:
     rng = np.random.default_rng(3)
     positions = bell.rest + 0.1 * L0 * rng.standard_normal(bell.rest.shape)
     forces = np.empty_like(positions)
     bell.spring_forces(positions, time, forces)
-    expected = _reference_forces(bell, positions, time)
+    assert scene.bell.muscle_taper > 0.0  # the preset's tapered muscle (Eq. B9t)
+    expected = _reference_forces(bell, positions, time, scene)
     scale = np.abs(expected).max()
     np.testing.assert_allclose(forces, expected, atol=1e-12 * scale)
     # Newton's third law: no net force and no net torque from internal springs.
     np.testing.assert_allclose(forces.sum(axis=0), 0.0, atol=1e-10 * scale)
     torque = np.cross(positions, forces).sum(axis=0)
     np.testing.assert_allclose(torque, 0.0, atol=1e-9 * scale * np.abs(positions).max())
+
+
+def test_a_tapered_muscle_contracts_most_at_the_margin() -> None:
+    """Eq. B9t: each muscle spring's rest length at full activation is L0 (1 - ratio w), its
+    stiffness k (1 + (stiffening - 1) w), w = 1 - taper h / (band H) from its mid-point's height;
+    the same springs as the untapered bell (taper 0 is B9 itself: the regression references)."""
+    band = {**SMALL, "bell.muscle_band": 0.6, "bell.muscle_taper": 0.0}  # three rings in the band
+    plain_scene = jellysim.load_scene(scenes.one_table("moon-jelly"), band)
+    b = plain_scene.bell
+    tapered = BellInFluid(
+        jellysim.load_scene(scenes.one_table("moon-jelly"), {**band, "bell.muscle_taper": 1.0})
+    ).body
+    plain = BellInFluid(plain_scene).body
+    np.testing.assert_array_equal(tapered.springs.pairs, plain.springs.pairs)
+    np.testing.assert_array_equal(tapered.springs.muscle, plain.springs.muscle)
+    peak = b.jet_fraction * b.period  # a = 1
+    assert tapered.activation(peak) == pytest.approx(1.0)
+    positions = tapered.rest.copy()
+    forces = np.empty_like(positions)
+    tapered.spring_forces(positions, peak, forces)
+    s = tapered.springs
+    height = (tapered.rest[s.pairs].mean(axis=1) - tapered.shape.centre)[:, 2]
+    w = np.clip(1.0 - height / (b.muscle_band * b.height), 0.0, 1.0)
+    a = tapered.activation(peak)
+    muscle = s.muscle
+    np.testing.assert_allclose(
+        tapered._rest_length[muscle],
+        s.rest_length[muscle] * (1.0 - b.muscle_ratio * a * w[muscle]),
+        rtol=1e-14,
+    )
+    np.testing.assert_allclose(
+        tapered._stiffness[muscle],
+        b.spring_stiffness * (1.0 + (b.muscle_stiffening - 1.0) * a * w[muscle]),
+        rtol=1e-14,
+    )
+    np.testing.assert_array_equal(tapered._rest_length[~muscle], s.rest_length[~muscle])
+    # The lowest rings shorten by nearly the full ratio, the band's top ones by little.
+    low, high = w[muscle].max(), w[muscle].min()
+    assert low > 0.8 and high < 0.2, (low, high)
+    # The margin draws in less overall than with the whole band alike, never more.
+    plain_forces = np.empty_like(positions)
+    plain.spring_forces(positions, peak, plain_forces)
+    assert np.abs(forces).max() < np.abs(plain_forces).max()
 
 
 def test_relaxed_bell_feels_no_spring_force(bell: SoftBell) -> None:

@@ -14,7 +14,10 @@ docs/theory/soft-bell.md §1-3): its shape, its particles, its springs and its c
   of the circumferential direction at its midpoint). With the activation ``a(t)`` in [0, 1], the
   pulse waveform of the kinematic bell (``bell.waveform``, ``jet_fraction``, ``period``), their rest
   length is ``L0 (1 - muscle_ratio a)`` and their stiffness ``k (1 + (muscle_stiffening - 1) a)``:
-  the paper's "ratio 0.40" and "x 50" (DESIGN §2 reading of the ratio).
+  the paper's "ratio 0.40" and "x 50" (DESIGN §2 reading of the ratio). With ``muscle_taper`` t > 0
+  a muscle spring whose mid-point is h above the margin plane has its shortening and stiffening
+  scaled by ``w = 1 - t h / (muscle_band x H)``: the band bends the bell gradually instead of
+  folding it at the band's top (docs/theory/soft-bell.md §3).
 
 The bell in the water (§4), the margin that drives the roots (§5) and the rendering skin (§6)
 live in :mod:`jellysim.coupling.bell_in_fluid`, :mod:`jellysim.coupling.margin` and
@@ -161,6 +164,12 @@ class SoftBell:
             return band[pairs[:, 0]] & band[pairs[:, 1]] & (along >= CIRCUMFERENTIAL)
 
         self.springs = build_springs(rest, b.spring_radius * l0, muscle)
+        # Each muscle spring's share of the contraction (Eq. B9; 1 everywhere with no taper).
+        self._muscle_weight: np.ndarray | None = None
+        if b.muscle_taper > 0.0:
+            mid = height[self.springs.pairs].mean(axis=1)[self.springs.muscle]
+            share = 1.0 - b.muscle_taper * mid / (b.muscle_band * b.height)
+            self._muscle_weight = np.clip(share, 0.0, 1.0)
         self._tensions = np.zeros((len(self.springs.pairs), 3))
         self._stiffness = np.full(len(self.springs.pairs), self.stiffness)
         self._rest_length = self.springs.rest_length.copy()
@@ -185,10 +194,11 @@ class SoftBell:
         ``out`` (Eq. B8-B9)."""
         a = self.activation(time)
         muscle = self.springs.muscle
+        weight = 1.0 if self._muscle_weight is None else self._muscle_weight
         self._rest_length[:] = self.springs.rest_length
-        self._rest_length[muscle] *= 1.0 - self.muscle_ratio * a
+        self._rest_length[muscle] *= 1.0 - self.muscle_ratio * a * weight
         self._stiffness[:] = self.stiffness
-        self._stiffness[muscle] *= 1.0 + (self.muscle_stiffening - 1.0) * a
+        self._stiffness[muscle] *= 1.0 + (self.muscle_stiffening - 1.0) * a * weight
         kernels.spring_tensions(
             positions, self.springs.pairs, self._rest_length, self._stiffness, self._tensions
         )
@@ -244,7 +254,8 @@ class SoftBell:
     def stable_dt(self, activation: float = 1.0) -> float:
         """The explicit stage's limit for the springs (s) with the muscle at ``activation`` (the
         run uses full stiffening throughout): :func:`explicit_spring_dt` of the largest sum of
-        spring constants at a particle, the muscle's stiffened."""
+        spring constants at a particle, the muscle's stiffened (with ``muscle_taper``, a bound:
+        every muscle spring taken at its full share)."""
         factor = 1.0 + max(self.muscle_stiffening - 1.0, 0.0) * activation
         total = self._passive_total + factor * self._muscle_total
         return explicit_spring_dt(float(total.max(initial=0.0)), self.mass)

@@ -436,6 +436,15 @@ class Bell:
         doc="mass-spring: height of the margin band holding the circular muscle, a fraction of "
         "the bell height",
     )
+    muscle_taper: float = param(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        doc="mass-spring: how the circular muscle weakens up its band: a muscle spring's "
+        "shortening and stiffening are scaled by 1 - taper x (its mid-point's height / the "
+        "band's height); 0: the whole band alike (the paper's), 1: full at the margin, none at "
+        "the band's top",
+    )
     speed_variation: float = param(
         0.8,
         ge=0.0,
