@@ -21,8 +21,8 @@ from jellysim.coupling.bell_in_fluid import STILL_WATER_ACCELERATION_NUMBER
 def test_under_gravity_the_step_is_the_still_water_bound(
     overrides: dict[str, object], spacing: float, steps: int
 ) -> None:
-    """12 steps a 1/20 s frame at the preset's l0 = 0.16 m (a free fall over the water's 7.04 m
-    would take 19) and the 18 a 1/10 s frame that the coarse gravity test was validated at."""
+    """12 steps a 1/20 s frame at the preset's l0 = 0.16 m (a free fall over the water's 5.76 m
+    would take 17) and the 18 a 1/10 s frame that the coarse gravity test was validated at."""
     moon = jellysim.Simulation(jellysim.load_scene("moon-jelly", overrides))
     dt = moon.coupling.solver.stable_dt()
     assert dt == pytest.approx(STILL_WATER_ACCELERATION_NUMBER * math.sqrt(spacing / 9.81))
