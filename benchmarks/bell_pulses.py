@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from scenes import SWIM, SWIM_PERIOD  # noqa: E402
 
 import jellysim  # noqa: E402
+from jellysim.config.load import parse_override  # noqa: E402
 
 PULSES = 5
 PAPER_K_COARSE = 31.25  # N/m: 20 N/m x 0.25 / 0.16
@@ -72,10 +72,7 @@ def main() -> None:
     parser.add_argument("--full", action="store_true")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
-    changes: dict[str, object] = {}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        changes[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+    changes: dict[str, object] = dict(parse_override(item) for item in args.set)
     factors: list[float | None] = [None] if args.full else list(args.factors)
     for factor in factors:
         start = time.perf_counter()
