@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from jellysim.tentacle.contact import no_obstacle
 from jellysim.tentacle.kernels import ChainModel, Medium, advance_frame
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -33,5 +34,6 @@ def hang(
         dt,
         diagnostics,
         np.zeros((1, 0, 3)),  # no drag impulse recorded
+        no_obstacle(),
     )
     return diagnostics

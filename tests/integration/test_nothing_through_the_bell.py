@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scenes
+from faultkit import assert_same_result
+from shells import distance_to_surface, inside_closed_surface
 
 import jellysim
 from jellysim import fields
@@ -41,44 +43,6 @@ def test_every_jellyfish_preset_is_checked() -> None:
         and jellysim.load_scene(name).tentacle_count > 0
     ]
     assert sorted(with_bell) == sorted(KINEMATIC + SOFT)
-
-
-EDGE_NUDGE = np.array([1.37e-9, 2.71e-9, 0.0])  # of the surface's size: off every mesh edge
-
-
-def inside_closed_surface(
-    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
-) -> np.ndarray:
-    """Whether each point (N, 3) lies inside the closed triangle surface: the number of
-    triangles that a ray from the point along +z crosses is odd.
-
-    The points are nudged sideways by a few 1e-9 of the surface's size before the count, so that
-    no ray runs exactly along an edge of the mesh (a root's chain hanging straight down at the
-    angle of a mesh meridian would otherwise cross the edge's two triangles twice or not at all,
-    and be miscounted)."""
-    inside = np.zeros(len(points), dtype=bool)
-    low, high = vertices.min(axis=0), vertices.max(axis=0)
-    near = np.all((points >= low) & (points <= high), axis=1)
-    if not near.any():
-        return inside
-    p = points[near] + EDGE_NUDGE * float(np.max(high - low))
-    a, b, c = (vertices[faces[:, k]] for k in range(3))  # (M, 3) each, the triangles' corners
-    # Barycentric coordinates of each point's (x, y) in each triangle's (x, y) projection.
-    v0, v1 = (b - a)[:, :2], (c - a)[:, :2]
-    det = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]  # (M,)
-    usable = np.abs(det) > 1e-18
-    a, v0, v1, det = a[usable], v0[usable], v1[usable], det[usable]
-    ab_z, ac_z = (b[usable] - a)[:, 2], (c[usable] - a)[:, 2]
-    crossings = np.zeros(len(p), dtype=np.int64)
-    for start in range(0, len(p), 256):
-        q = p[start : start + 256, None, :2] - a[None, :, :2]  # (n, M, 2)
-        s = (q[..., 0] * v1[None, :, 1] - q[..., 1] * v1[None, :, 0]) / det
-        t = (v0[None, :, 0] * q[..., 1] - v0[None, :, 1] * q[..., 0]) / det
-        hit = (s >= 0.0) & (t >= 0.0) & (s + t < 1.0)
-        z = a[None, :, 2] + s * ab_z[None] + t * ac_z[None]
-        crossings[start : start + 256] = np.sum(hit & (z > p[start : start + 256, None, 2]), axis=1)
-    inside[np.flatnonzero(near)] = crossings % 2 == 1
-    return inside
 
 
 def assert_nothing_inside(result: jellysim.Result) -> None:
@@ -172,3 +136,78 @@ def test_soft_bell_tentacles_start_outside_the_bell_at_the_presets_own_scale(nam
     )
     skin = simulation.coupling.skin
     assert not inside_closed_surface(points, skin.rest_surface, skin.faces).any()
+
+
+# brown-jelly in a 0.5 m/s current straight up: the current folds the tentacles up over the
+# outside of the bell, and without the contact up to 21 of their particles are inside its wall.
+UPWARD_CURRENT = {
+    "duration": 1.0,
+    "flow.model": "current",
+    "flow.direction": [0.0, 0.0, 1.0],
+    "flow.speed": 0.5,
+}
+
+
+def inside_per_frame(result: jellysim.Result) -> np.ndarray:
+    positions = result.read(fields.TENTACLE_POSITION)
+    vertices = result.read(fields.BELL_SURFACE_VERTICES)
+    counts = np.zeros(result.frames, dtype=int)
+    for frame in range(result.frames):
+        points = positions[frame, :, 1:].reshape(-1, 3)
+        points = points[np.all(np.isfinite(points), axis=1)]
+        counts[frame] = inside_closed_surface(
+            points, vertices[frame].astype(np.float64), result.bell_surface_faces
+        ).sum()
+    return counts
+
+
+def on_the_surface(result: jellysim.Result, frame: int, within: float) -> int:
+    """How many free tentacle particles lie within ``within`` (m) of the bell's surface."""
+    points = result.read(fields.TENTACLE_POSITION, frame)[:, 1:].reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    surface = result.read(fields.BELL_SURFACE_VERTICES, frame).astype(np.float64)
+    return int(np.sum(distance_to_surface(points, surface, result.bell_surface_faces) < within))
+
+
+def test_the_contact_keeps_tentacles_folded_by_a_current_out_of_the_bell(tmp_path: Path) -> None:
+    """The case the contact is for (docs/theory/tentacle.md §8): with bell.tentacle_contact off
+    (the paper's model) tentacles pass into the bell's wall; with it on none does, and some lie
+    on the surface, where the contact put them."""
+    off = {**UPWARD_CURRENT, "bell.tentacle_contact": False}
+    with jellysim.run("brown-jelly", tmp_path / "off", overrides=off) as result:
+        assert inside_per_frame(result).max() >= 10
+    with jellysim.run("brown-jelly", tmp_path / "on", overrides=UPWARD_CURRENT) as result:
+        assert inside_per_frame(result).max() == 0
+        assert on_the_surface(result, 18, 1e-4 * result.scene.bell.radius) >= 3
+
+
+def test_a_run_whose_tentacles_touch_the_bell_resumes_bit_for_bit(tmp_path: Path) -> None:
+    """The shell the tentacles are kept out of is rebuilt from the state at each frame, so a
+    run aborted mid-contact resumes to the same bits (DESIGN §3)."""
+    scene = jellysim.load_scene("brown-jelly", {**UPWARD_CURRENT, "solver.checkpoint_every": 4})
+
+    class Interrupt(Exception):
+        pass
+
+    def abort(simulation: jellysim.Simulation) -> None:
+        if simulation.frame == 22:  # the tentacles lie on the bell from frame 12 on
+            raise Interrupt
+
+    with pytest.raises(Interrupt):
+        jellysim.run(scene, tmp_path / "aborted", observers=[abort])
+    jellysim.run(scene, tmp_path / "aborted", resume=True).close()
+    jellysim.run(scene, tmp_path / "reference").close()
+    assert_same_result(tmp_path / "aborted", tmp_path / "reference")
+
+
+def test_the_moon_jelly_fringe_stays_out_of_its_wall_at_the_presets_own_scale(
+    tmp_path: Path,
+) -> None:
+    """moon-jelly itself (its 4 m bell at l0 = 0.16 m, the paper's fringe) through its first
+    contraction, 1 s: the margin draws in over the fringe from t = 0.55 s. Without the contact
+    53 of the fringe's 190 free particles are inside the drawn wall at t = 0.6 s and 60-70 in
+    every later frame (docs/theory/tentacle.md §8); with it none is, and the fringe lies on the
+    wall."""
+    with jellysim.run("moon-jelly", tmp_path, overrides={"duration": 1.0}) as result:
+        assert inside_per_frame(result).max() == 0
+        assert on_the_surface(result, result.frames - 1, 1e-3) >= 10

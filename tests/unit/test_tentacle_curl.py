@@ -9,6 +9,7 @@ import pytest
 
 import jellysim
 from jellysim.errors import InputError
+from jellysim.tentacle.contact import no_obstacle
 from jellysim.tentacle.kernels import (
     Medium,
     advance_frame,
@@ -155,7 +156,7 @@ def test_unloaded_chain_keeps_its_rest_shape(root, tau):
         diagnostics = np.zeros((1, 3))
         advance_frame(
             x, v, zeros, zeros, zeros + DOWN, normals, rest, zeros[:, :, None], model, medium, dt,
-            diagnostics, np.zeros((1, 0, 3)),
+            diagnostics, np.zeros((1, 0, 3)), no_obstacle(),
         )  # fmt: skip
         assert diagnostics[0, 2] == -1
         assert np.abs(x - start).max() < 1e-9
@@ -182,7 +183,7 @@ def test_a_straight_chain_coils_into_its_rest_shape():
     normals = zeros + OUTWARD
     advance_frame(
         x, v, zeros, zeros, zeros + DOWN, normals, rest, zeros[:, :, None], model, medium, 1 / 120,
-        diagnostics, np.zeros((1, 0, 3)),
+        diagnostics, np.zeros((1, 0, 3)), no_obstacle(),
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     assert total_energy(x[0], c, True, DOWN, OUTWARD, rest[0]) < 1e-9 * energy_start

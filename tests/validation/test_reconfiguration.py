@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 from jellysim.reference.reconfiguration import rod_reconfiguration
+from jellysim.tentacle.contact import no_obstacle
 from jellysim.tentacle.kernels import Medium, advance_frame, slender_drag_gains
 from jellysim.tentacle.model import build_chain_model, effective_bending_rigidity
 
@@ -58,7 +59,7 @@ def scaled_drag(cauchy: float, speed: float = SPEED, duration: float = 12.0, dt:
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + DOWN, zeros, np.zeros_like(x), flow, model, medium, dt,
-        diagnostics, np.zeros((1, 0, 3)),
+        diagnostics, np.zeros((1, 0, 3)), no_obstacle(),
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     chain, velocity = x[0], v[0]

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from scipy.optimize import fsolve
 
+from jellysim.tentacle.contact import no_obstacle
 from jellysim.tentacle.kernels import Medium, advance_frame, slender_drag_gains
 from jellysim.tentacle.model import build_chain_model
 
@@ -52,7 +53,7 @@ def fall(direction, particles=11, duration=4.0, dt=2e-3):
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + np.array([0.0, 0.0, -1.0]), zeros, np.zeros_like(x),
-        zeros[:, :, None], model, medium, dt, diagnostics, np.zeros((1, 0, 3)),
+        zeros[:, :, None], model, medium, dt, diagnostics, np.zeros((1, 0, 3)), no_obstacle(),
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     return v[0]
@@ -122,7 +123,7 @@ def test_the_recorded_drag_impulse_is_all_the_water_gave_a_free_chain(law: str) 
     diagnostics = np.zeros((1, 3))
     advance_frame(
         x, v, zeros, zeros, zeros + np.array([0.0, 0.0, -1.0]), zeros, np.zeros_like(x), flow,
-        model, medium, dt, diagnostics, impulse,
+        model, medium, dt, diagnostics, impulse, no_obstacle(),
     )  # fmt: skip
     assert diagnostics[0, 2] == -1
     weight = (RHO_T - RHO_W) * model.volume * G  # buoyant weight per particle, downwards

@@ -653,7 +653,7 @@ def recorded_tree(text: str) -> Tree:
     since records every key), and the one flow then was the paper's, "bell" (not the "auto"
     default, which gives a soft bell in MPS water the simulated water); one with a mass-spring
     bell but no ``bell.root_placement`` hung its tentacles from its particles ("particles",
-    issue 25)."""
+    issue 25); one with a bell but no ``bell.tentacle_contact`` let them pass into it (false)."""
     tree = tomllib.loads(text)
     flow = tree.get("flow")
     if flow is None or (isinstance(flow, dict) and "model" not in flow):
@@ -663,6 +663,11 @@ def recorded_tree(text: str) -> Tree:
     if soft and isinstance(bell, dict) and "root_placement" not in bell:
         # issue 25: before the key, a soft bell's roots hung from its particles
         tree["bell"] = {**bell, "root_placement": "particles"}
+    bell = tree.get("bell")
+    if isinstance(bell, dict) and bell.get("model", "none") != "none":
+        if "tentacle_contact" not in bell:
+            # issues 25-26: before the key, nothing kept the tentacles out of the bell
+            tree["bell"] = {**bell, "tentacle_contact": False}
     return tree
 
 
@@ -671,8 +676,8 @@ def same_scene(first: str, second: str) -> bool:
     under today's schema: a key that one text lacks takes its default. A key added to jellysim
     later is written into every new text at its default, which keeps the older behaviour; that
     changes the text, not the scene (docs/decisions.md, "Slender drag and currents"), except
-    ``flow.model`` and ``bell.root_placement``, whose defaults are no longer what older texts
-    ran (:func:`recorded_tree`). A
+    ``flow.model``, ``bell.root_placement`` and ``bell.tentacle_contact``, whose defaults are no
+    longer what older texts ran (:func:`recorded_tree`). A
     text that does not read as a scene is no match."""
     if first == second:
         return True

@@ -445,6 +445,14 @@ class Bell:
         "band's height); 0: the whole band alike (the paper's), 1: full at the margin, none at "
         "the band's top",
     )
+    tentacle_contact: bool = param(
+        True,
+        kind="bool",
+        doc="tentacles and oral arms are kept out of the bell's tissue, the closed shell every "
+        "output draws: after each substep a particle inside it is put on the nearest point of "
+        "its surface (an inelastic, frictionless contact; the bell does not feel it); false: "
+        "the paper's model, whose tentacles feel only the water",
+    )
     speed_variation: float = param(
         0.8,
         ge=0.0,

@@ -27,6 +27,7 @@ from jellysim.fields import Dataset
 from jellysim.io.result import frame_datasets
 from jellysim.simulation.loop import Simulation, register_loop
 from jellysim.tentacle import kernels
+from jellysim.tentacle.contact import Obstacle, no_obstacle, shell_obstacle
 from jellysim.tentacle.flow import flow_at_tentacles, flow_noise_for
 from jellysim.tentacle.kernels import advance_frame, rest_shape_positions
 from jellysim.tentacle.layout import RootLayout, root_layout
@@ -40,6 +41,7 @@ from jellysim.tentacle.model import (
 )
 from jellysim.tentacle.roots import Forcing, RootDriver
 
+NO_OBSTACLE = no_obstacle()
 # Watchdog: a chain whose RMS speed exceeds this multiple of the scene's speed scale has run away.
 RUNAWAY_SPEED_FACTOR = 100.0
 
@@ -204,14 +206,16 @@ class ChainGroup:
             self.plan.dt,
             self.diagnostics.copy(),
             self.drag_impulse.copy(),
+            NO_OBSTACLE,
         )
 
     def step_frame(
-        self, frame: int, water: np.ndarray | None = None
+        self, frame: int, water: np.ndarray | None = None, obstacle: Obstacle | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance the group by one frame from ``frame``; the substep times, and the roots and
         their velocities (Tg, 3) at the last of them. ``water`` (Tg, Pg, 3) m/s: the simulated
-        water's velocity at each particle, held over the frame (``flow.model = "fluid"``)."""
+        water's velocity at each particle, held over the frame (``flow.model = "fluid"``);
+        ``obstacle``: the bell's shell over the frame, kept out of (``bell.tentacle_contact``)."""
         times = self.substep_times(frame)
         # The roots follow the margin, C1 in time (paper §4.1, §4.2.4).
         roots, root_velocities, directions = self.driver.roots(times)
@@ -246,6 +250,7 @@ class ChainGroup:
             self.plan.dt,
             self.diagnostics,
             self.drag_impulse,
+            obstacle if obstacle is not None else NO_OBSTACLE,
         )
         return times, roots[-1], root_velocities[-1]
 
@@ -325,9 +330,22 @@ class TentacleSimulation(Simulation):
         # Takes the drag impulses (N, 3) N s at the points (N, 3) where the water was sampled,
         # once a frame (flow.two_way): the reaction on the water.
         self.water_reaction: Callable[[np.ndarray, np.ndarray], None] | None = None
+        # The bell's shell (vertices at the frame's start and end, faces) over the frame from
+        # the given frame, which the tentacles are kept out of (bell.tentacle_contact): set here
+        # for a kinematic bell, by the soft-bell loop for its drawn skin.
+        self.bell_shell: Callable[[int], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         if driver is None:
             self.bell = make_root_driver(scene)
             driver = self.bell
+            surface = getattr(self.bell, "surface", None)
+            if surface is not None:
+                faces = self.bell.faces  # type: ignore[attr-defined]
+                dt = self.frame_dt
+                self.bell_shell = lambda frame: (
+                    surface(frame * dt),
+                    surface((frame + 1) * dt),
+                    faces,
+                )
         self.driver: RootDriver = driver
         self.layout: RootLayout = root_layout(scene)
         single = len(scene.groups) == 1
@@ -429,8 +447,9 @@ class TentacleSimulation(Simulation):
         sampled = [self._water(group) for group in self.groups]
         # Where the water was sampled: where its reaction goes (Eq. S2).
         starts = [g.positions.reshape(-1, 3).copy() for g in self.groups]
+        obstacle = self._obstacle()
         done = [
-            (group, group.step_frame(self.frame, water))
+            (group, group.step_frame(self.frame, water, obstacle))
             for group, water in zip(self.groups, sampled, strict=True)
         ]
         if self.water_reaction is not None:
@@ -449,6 +468,12 @@ class TentacleSimulation(Simulation):
         self.notify()
         for group, (times, _, _) in done:
             group.check(times, self.time)
+
+    def _obstacle(self) -> Obstacle | None:
+        """The bell's shell over this frame where the tentacles are kept out of it."""
+        if not self.scene.bell.tentacle_contact or self.bell_shell is None:
+            return None
+        return shell_obstacle(*self.bell_shell(self.frame))
 
     def _water(self, group: ChainGroup) -> np.ndarray | None:
         """The simulated water's velocity (Tg, Pg, 3) at ``group``'s particles where the scene's

@@ -29,6 +29,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from jellysim.tentacle.contact import Obstacle, push_out
+
 REYNOLDS_STOKES = 1.0  # below: Stokes drag 3 pi mu d u (Eq. T4, first branch)
 REYNOLDS_HOLD = 1.0e4  # above: the drag coefficient is held at its value here (Eq. T4)
 DRAG_SPHERE = 0  # tentacles.drag = "sphere": the paper's law, Eq. (T4-T5)
@@ -686,6 +688,7 @@ def advance_frame(
     dt: float,
     diagnostics: np.ndarray,
     drag_impulse: np.ndarray,
+    obstacle: Obstacle,
 ) -> None:
     """Advance all chains through the S substeps of one frame, in place.
 
@@ -704,6 +707,9 @@ def advance_frame(
     ``drag_impulse`` (T, P, 3) N s, or (T, 0, 3) to skip it: the water's drag on each particle
     summed over the substeps, ``dt k (u - v)`` with the gain of the step and the velocity of its
     solve (added to what it holds; the reaction that two-way coupling gives the water).
+    ``obstacle``: the bell's shell over the frame, which the free particles are kept out of
+    after each substep's projection (Eq. T15-T16; :func:`jellysim.tentacle.contact.no_obstacle`
+    for none).
     """
     n_chains = positions.shape[0]
     n_particles = positions.shape[1]
@@ -853,6 +859,8 @@ def advance_frame(
                 edges,
                 work,
             )
+            # Out of the bell's tissue, Eq. (T15-T16): the velocity below carries the wall's.
+            push_out(x, first, obstacle, (s + 1.0) / n_substeps)
             # Velocities from the displacement, Eq. (T9).
             if first == 1:
                 for k in range(3):

@@ -1,0 +1,77 @@
+"""Cost of keeping the tentacles out of the bell (``bell.tentacle_contact``, docs/theory/
+tentacle.md §8) at the full ``moon-jelly``, in its first contraction, where the margin lies on
+the fringe.
+
+    .venv/bin/python benchmarks/bench_contact.py [--frames 14] [--repeats 5]
+
+Runs ``moon-jelly`` for ``--frames`` frames (0.7 s: the margin has swept over the fringe since
+0.55 s), then times the tentacles' next frame from that state with the contact and without it
+(the mean of the repeats, the state restored before each), beside one frame of the bell in its
+water; prints how many fringe particles the contact holds on the wall.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+
+import jellysim
+from jellysim.tentacle.contact import shell_obstacle
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=14)
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    simulation = jellysim.Simulation(jellysim.load_scene("moon-jelly", {"duration": 2.0}))
+    simulation.prepare()
+    for _ in range(args.frames):
+        simulation.step_frame()
+    c = simulation.coupling  # type: ignore[attr-defined]
+    tentacles = simulation.tentacles  # type: ignore[attr-defined]
+    start_surface = c.skin.surface(c.position)
+    begin = time.perf_counter()
+    c.advance((simulation.frame + 1) * simulation.frame_dt, simulation.frame_dt)
+    c.record(simulation.frame + 1)
+    bell_frame = time.perf_counter() - begin
+    obstacle = shell_obstacle(start_surface, c.skin.surface(c.position), c.skin.faces)
+    water = [tentacles._water(group) for group in tentacles.groups]
+    saved = [(g.positions.copy(), g.velocities.copy()) for g in tentacles.groups]
+
+    def frame(with_contact: bool) -> float:
+        total = 0.0
+        for _ in range(args.repeats):
+            for group, (x, v) in zip(tentacles.groups, saved, strict=True):
+                group.positions[:] = x
+                group.velocities[:] = v
+            begin = time.perf_counter()
+            for group, w in zip(tentacles.groups, water, strict=True):
+                group.step_frame(tentacles.frame, w, obstacle if with_contact else None)
+            total += time.perf_counter() - begin
+        return total / args.repeats
+
+    frame(True)  # compile, if the cache is cold
+    without, with_contact = frame(False), frame(True)
+    fringe = tentacles.groups[0].positions[:, 1:].reshape(-1, 3)
+    moved = fringe - saved[0][0][:, 1:].reshape(-1, 3)
+    frame(False)
+    drift = tentacles.groups[0].positions[:, 1:].reshape(-1, 3) - saved[0][0][:, 1:].reshape(-1, 3)
+    held = int(np.sum(np.linalg.norm(moved - drift, axis=1) > 1e-9))
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "
+        f"t = {simulation.time + simulation.frame_dt:.2f} s, {len(c.skin.faces)} triangles\n"
+        f"tentacles' frame: {1e3 * without:.2f} ms without the contact, "
+        f"{1e3 * with_contact:.2f} ms with it (+{1e3 * (with_contact - without):.2f} ms); "
+        f"the bell in its water: {bell_frame:.2f} s a frame "
+        f"({100 * (with_contact - without) / bell_frame:.2f} % of it); "
+        f"{held} of {len(fringe)} free fringe particles moved by the contact"
+    )
+
+
+if __name__ == "__main__":
+    main()

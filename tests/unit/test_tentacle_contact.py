@@ -1,0 +1,168 @@
+"""The tentacle-bell contact (docs/theory/tentacle.md §8, Eq. T15-T16): a particle inside the
+bell's drawn shell is put on the nearest point of its surface, after each substep."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shells import inside_closed_surface
+
+from jellysim.bell.kinematic import bell_faces
+from jellysim.tentacle.contact import (
+    CLEARANCE,
+    _closest_on_triangle,
+    inside_shell,
+    no_obstacle,
+    push_out,
+    shell_obstacle,
+)
+from jellysim.tentacle.kernels import ChainModel, Medium, advance_frame
+from jellysim.tentacle.model import build_chain_model
+
+# A closed box [0, 1] x [0, 1] x [0, 0.5], its 12 triangles facing outwards.
+BOX_VERTICES = np.array(
+    [[x, y, z] for z in (0.0, 0.5) for y in (0.0, 1.0) for x in (0.0, 1.0)], dtype=np.float64
+)
+BOX_FACES = np.array(
+    [
+        [0, 2, 1], [1, 2, 3],  # bottom
+        [4, 5, 6], [5, 7, 6],  # top
+        [0, 1, 4], [1, 5, 4],  # y = 0
+        [2, 6, 3], [3, 6, 7],  # y = 1
+        [0, 4, 2], [2, 4, 6],  # x = 0
+        [1, 3, 5], [3, 7, 5],  # x = 1
+    ]
+)  # fmt: skip
+
+
+def shell(sectors: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """A bell shell of the soft bell's skin topology: outer half-ellipsoid of radius 1 and height
+    0.5, the inner one 0.1 inside."""
+    from jellysim.bell.kinematic import MESH_RINGS
+
+    s = np.arange(1, MESH_RINGS + 1) / MESH_RINGS
+    ring_s = np.concatenate([s, s[-2::-1]])
+    outer = np.arange(len(ring_s)) < MESH_RINGS
+    a = 0.5 * np.pi * ring_s
+    r = np.where(outer, 1.0, 0.9)
+    h = np.where(outer, 0.5, 0.4)
+    angles = 2 * np.pi * np.arange(sectors) / sectors
+    rho = (r * np.sin(a))[:, None] * np.ones(sectors)
+    z = (h * np.cos(a))[:, None] * np.ones(sectors)
+    rings = np.stack([rho * np.cos(angles), rho * np.sin(angles), z], axis=-1).reshape(-1, 3)
+    vertices = np.concatenate([[[0.0, 0.0, 0.5]], rings, [[0.0, 0.0, 0.4]]])
+    return vertices, bell_faces(sectors)
+
+
+def test_the_nearest_point_of_a_triangle_matches_a_dense_search() -> None:
+    # Ericson's Voronoi-region walk against the minimum over 20,301 barycentric samples: for
+    # points off every vertex, edge and the face, the distances agree to the sampling's error.
+    rng = np.random.default_rng(3)
+    n = 200
+    u, v = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    keep = u + v <= 1.0
+    u, v = u[keep], v[keep]
+    work, out = np.empty((5, 3)), np.empty(3)
+    for _ in range(50):
+        corners = rng.normal(size=(3, 3))
+        p = rng.normal(size=3) * 2.0
+        samples = (
+            corners[0]
+            + u[:, None] * (corners[1] - corners[0])
+            + v[:, None] * (corners[2] - corners[0])
+        )
+        dense = np.sqrt(np.min(np.sum((samples - p) ** 2, axis=1)))
+        exact = np.sqrt(_closest_on_triangle(p, corners, work, out))
+        edge = max(np.linalg.norm(corners[1] - corners[0]), np.linalg.norm(corners[2] - corners[0]))
+        assert exact <= dense + 1e-12
+        assert dense - exact <= edge / n  # the samples' spacing bounds the dense search's error
+        np.testing.assert_allclose(np.linalg.norm(out - p), exact, rtol=1e-12)
+
+
+def test_the_parity_rule_agrees_with_the_check_on_stored_results() -> None:
+    # The kernel's inside test and the one tests/integration uses on results classify 4,000
+    # points in and around a bell shell alike.
+    vertices, faces = shell()
+    obstacle = shell_obstacle(vertices, vertices, faces)
+    rng = np.random.default_rng(7)
+    points = rng.uniform([-1.1, -1.1, -0.1], [1.1, 1.1, 0.6], size=(4000, 3))
+    corners = np.empty((3, 3))
+    ours = np.array([inside_shell(p, obstacle, 0.5, corners) for p in points])
+    np.testing.assert_array_equal(ours, inside_closed_surface(points, vertices, faces))
+    assert 100 < ours.sum() < 3900  # both kinds of point were tried
+
+
+def test_a_particle_in_the_wall_goes_to_the_nearest_surface() -> None:
+    # Inside the box, 0.1 below its top and 0.3 and more from every other face: put on the top,
+    # CLEARANCE of the box's size (1) above it; particles outside are left exactly where they are.
+    obstacle = shell_obstacle(BOX_VERTICES, BOX_VERTICES, BOX_FACES)
+    x = np.array([[0.5, 0.5, 2.0], [0.4, 0.3, 0.4], [1.5, 0.5, 0.25], [0.7, 0.6, -0.2]])
+    before = x.copy()
+    moved = push_out(x, 1, obstacle, 0.0)
+    assert moved == 1
+    assert obstacle.clearance == CLEARANCE
+    np.testing.assert_allclose(x[1], [0.4, 0.3, 0.5 + obstacle.clearance], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(np.delete(x, 1, axis=0), np.delete(before, 1, axis=0))
+
+
+def test_the_shell_moves_linearly_through_the_frame() -> None:
+    # The box rises by 1 over the frame: at tau = 0.5 it spans z in [0.5, 1.0], and a particle
+    # at z = 0.6 is put on its bottom, the nearer face.
+    obstacle = shell_obstacle(BOX_VERTICES, BOX_VERTICES + [0.0, 0.0, 1.0], BOX_FACES)
+    x = np.array([[0.5, 0.5, 2.0], [0.45, 0.55, 0.6]])
+    assert push_out(x.copy(), 1, obstacle, 0.0) == 0  # at the start the box is below
+    assert push_out(x, 1, obstacle, 0.5) == 1
+    np.testing.assert_allclose(x[1], [0.45, 0.55, 0.5 - obstacle.clearance], atol=1e-15)
+
+
+def test_no_obstacle_is_the_paper_model() -> None:
+    x = np.array([[0.5, 0.5, 2.0], [0.4, 0.3, 0.4]])
+    assert push_out(x, 1, no_obstacle(), 0.0) == 0
+
+
+def hanging_chain(particles: int = 21, spacing: float = 0.02) -> tuple[ChainModel, Medium]:
+    model = build_chain_model(particles, spacing, 1.0e5, 1100.0)
+    medium = Medium(1000.0, 1.0e-3, np.array([0.0, 0.0, -9.81]), 1100.0)
+    return model, medium
+
+
+@pytest.mark.parametrize("contact", [False, True])
+def test_a_sweeping_wall_pushes_a_hanging_chain_and_never_passes_it(contact: bool) -> None:
+    """A slab 0.2 m thick sweeps sideways at 0.5 m/s through the lower half of a 0.4 m chain
+    hanging from a fixed root. With the contact no particle is ever inside it, and the chain's
+    lower part is carried on the wall's front face (inelastic: it does not bounce off ahead);
+    without it the wall passes through the chain (the paper's model)."""
+    model, medium = hanging_chain()
+    particles, spacing = 21, 0.02
+    down = np.array([0.0, 0.0, -1.0])
+    x = (np.arange(particles)[:, None] * spacing * down)[None].copy()
+    v = np.zeros_like(x)
+    # The slab: x in [-0.5, -0.3] at the start, moving to +x; z in [-1, -0.2], y in [-1, 1].
+    slab = BOX_VERTICES * [0.2, 2.0, 1.6] + [-0.5, -1.0, -1.0]
+    speed, fps, substeps = 0.5, 50, 10
+    dt = 1.0 / (fps * substeps)
+    zeros = np.zeros((substeps, 1, 3))
+    inside_any = 0
+    for frame in range(50):  # 1 s: the slab's front travels from -0.3 to 0.2
+        start = slab + [speed * frame / fps, 0.0, 0.0]
+        end = slab + [speed * (frame + 1) / fps, 0.0, 0.0]
+        obstacle = shell_obstacle(start, end, BOX_FACES) if contact else no_obstacle()
+        diagnostics = np.zeros((1, 3))
+        advance_frame(
+            x, v, zeros, zeros, zeros + down, zeros, np.zeros_like(x), zeros[:, :, None],
+            model, medium, dt, diagnostics, np.zeros((1, 0, 3)), obstacle,
+        )  # fmt: skip
+        assert diagnostics[0, 2] == -1
+        assert diagnostics[0, 0] < 1e-3  # the segments keep their length
+        inside_any += int(inside_closed_surface(x[0, 1:], end, BOX_FACES).sum())
+    if contact:
+        assert inside_any == 0
+        # The particles below the slab's top (z = -0.2) lie on its front face, x = 0.2 at the
+        # end, pushed ahead of it (to within a spacing: they slide on it as the chain swings up);
+        # those above it drape over its top.
+        below = x[0, :, 2] < -0.2
+        assert below.sum() >= 5
+        assert np.all((x[0, below, 0] >= 0.2) & (x[0, below, 0] < 0.2 + spacing))
+    else:
+        assert inside_any > 100
+        assert abs(x[0, -1, 0]) < 0.01  # the wall went through: the chain still hangs
