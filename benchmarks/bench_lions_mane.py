@@ -2,7 +2,7 @@
 arms, two tentacle groups, each with its own substep (issue 25).
 
     .venv/bin/python benchmarks/bench_lions_mane.py [--threads N] [--duration S] [--repeats R]
-        [--no-output] [--parts]
+        [--no-output] [--parts] [--set KEY=VALUE ...]
 
 Each repeat runs ``jellysim.run("lions-mane", out=<temporary folder>)`` with output on
 (result.h5 written with every frame, the bell's mesh included, checkpoints as the preset sets
@@ -14,7 +14,8 @@ groups, per wall second) and the load average at the end of the repeat; once, th
 substeps per frame of each group. On a machine whose cores other work shares, the wall time
 mostly measures that work; the CPU time does not. ``--parts`` adds one run without output that
 splits a frame's time (wall and CPU, ms) between each group's compiled kernel and the Python
-around it (roots, flow, rest-frame normals, watchdog).
+around it (roots, flow, rest-frame normals, watchdog). ``--set KEY=VALUE`` (repeatable) changes a
+key of the preset as ``jellysim run --set`` does, e.g. ``--set bell.tentacle_contact=false``.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import time
 import numba
 
 import jellysim
+from jellysim.config.load import parse_override
 from jellysim.simulation import Simulation, tentacles
 
 SCENE = "lions-mane"
@@ -41,10 +43,10 @@ def particle_steps_per_frame(simulation: Simulation) -> int:
     )
 
 
-def timed_run(duration: float, output: bool) -> tuple[float, float]:
+def timed_run(duration: float, output: bool, changes: dict[str, object]) -> tuple[float, float]:
     """Wall and CPU time (s) of one run of ``duration`` simulated seconds; with output, the
     whole of ``jellysim.run`` (scene set-up and writing included), without, the frame loop."""
-    scene = jellysim.load_scene(SCENE, {"duration": duration})
+    scene = jellysim.load_scene(SCENE, {**changes, "duration": duration})
     if output:
         with tempfile.TemporaryDirectory() as folder:
             start, cpu = time.perf_counter(), time.process_time()
@@ -58,10 +60,10 @@ def timed_run(duration: float, output: bool) -> tuple[float, float]:
     return time.perf_counter() - start, time.process_time() - cpu
 
 
-def parts(duration: float) -> None:
+def parts(duration: float, changes: dict[str, object]) -> None:
     """Print the mean wall and CPU time per frame (ms) of each group's kernel call and of the rest
     of ``step_frame``, over one run of ``duration`` simulated seconds without output."""
-    scene = jellysim.load_scene(SCENE, {"duration": duration})
+    scene = jellysim.load_scene(SCENE, {**changes, "duration": duration})
     simulation = Simulation(scene)
     simulation.prepare()
     names = {id(g.positions): g.name for g in simulation.groups}  # type: ignore[attr-defined]
@@ -97,11 +99,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-output", action="store_true", help="step frames, write nothing")
     parser.add_argument("--parts", action="store_true", help="split a frame: kernels and Python")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
+    changes: dict[str, object] = dict(parse_override(item) for item in args.set)
     numba.set_num_threads(args.threads)
 
     start = time.perf_counter()
-    warm = Simulation(jellysim.load_scene(SCENE, {"duration": 0.1}))
+    warm = Simulation(jellysim.load_scene(SCENE, {**changes, "duration": 0.1}))
     warm.step_frame()
     print(f"first frame incl. JIT compile or cache load: {time.perf_counter() - start:.2f} s")
     print(
@@ -109,7 +113,7 @@ def main() -> None:
         f"numba {numba.__version__}, threads {numba.get_num_threads()}, "
         f"threading layer {numba.threading_layer()}"
     )
-    scene = jellysim.load_scene(SCENE, {"duration": args.duration})
+    scene = jellysim.load_scene(SCENE, {**changes, "duration": args.duration})
     frames = scene.frame_count - 1
     substeps = ", ".join(
         f"{g.name} {g.scene.tentacles.count}x{g.scene.tentacles.particles} {g.plan.substeps}/frame"
@@ -118,18 +122,18 @@ def main() -> None:
     work = particle_steps_per_frame(warm) * frames
     print(
         f"{SCENE}, {args.duration:g} s simulated, {frames} frames; {substeps}; "
-        f"output {'off' if args.no_output else 'on'}"
+        f"output {'off' if args.no_output else 'on'}" + "".join(f"; {item}" for item in args.set)
     )
     print(
         f"{'repeat':>6} {'wall [s]':>9} {'CPU [s]':>8} {'particle-steps/s':>17} "
         f"{'load average':>13}"
     )
     for repeat in range(args.repeats):
-        wall, cpu = timed_run(args.duration, not args.no_output)
+        wall, cpu = timed_run(args.duration, not args.no_output, changes)
         load = os.getloadavg()[0]
         print(f"{repeat:>6d} {wall:>9.2f} {cpu:>8.2f} {work / wall:>17.3g} {load:>13.2f}")
     if args.parts:
-        parts(args.duration)
+        parts(args.duration, changes)
 
 
 if __name__ == "__main__":

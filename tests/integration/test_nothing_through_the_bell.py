@@ -13,8 +13,11 @@ a marginal root lies on the margin, the shell's edge, by construction.
 - The soft-bell presets (moon-jelly, moon-jelly-weightless, moon-jelly-real-size) take 13 minutes
   and more for three pulses on 2 cores; they are checked on their bell and tentacles at the test
   scale of tests/scenes.py (SWIM: two pulses of the preset's soft bell shrunk to l0 = 0.25 m),
-  each with its own tentacle keys and flow. forced-tentacles has no bell; the fluid-only presets
-  no tentacles.
+  each with its own tentacle keys and flow; moon-jelly, whose margin sweeps over its fringe, also
+  at its own scale through its first contraction. forced-tentacles has no bell; the fluid-only
+  presets no tentacles.
+- What keeps them out is the tentacle-bell contact (``bell.tentacle_contact``, docs/theory/
+  tentacle.md §8): checked where it acts, against the same scene without it.
 """
 
 from __future__ import annotations
