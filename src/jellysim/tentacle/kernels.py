@@ -15,7 +15,9 @@ prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T
 3. exact projection onto ``|x_{i+1} - x_i| = d`` by Newton iterations of the fast projection
    on a tridiagonal system, O(P) each; it only removes the linearisation's second-order error
    (Eq. T8),
-4. ``v = (x_new - x_old) / dt`` (Eq. T9).
+4. where the chain has an obstacle (the bell's shell, ``bell.tentacle_contact``): the particles
+   inside it put back on its surface and the lengths projected again, in rounds (Eq. T15-T17),
+5. ``v = (x_new - x_old) / dt`` (Eq. T9).
 
 Solving bending and the constraints together keeps the scheme consistent at any dt: at rest its
 fixed point is the exact static equilibrium of the discrete chain.
@@ -673,6 +675,62 @@ def _assemble_constraint(
         rhs[lam] += normal[0] * r[0] + normal[1] * r[1] + normal[2] * r[2]
 
 
+CONTACT_ROUNDS = 32  # pushes out of the bell, each followed by a projection (Eq. T17)
+# A pushed particle's inverse mass in the projection after it, of its own: the first that lets the
+# projection converge (Eq. T17); 1 is the plain projection, which always does.
+HELD_WEIGHTS = (1.0e-3, 1.0e-1, 1.0)
+# Of the spacing: how far beyond the surface the rounds push, so that the projection after the
+# last one, which moves a held particle a little, leaves it outside (Eq. T17).
+CONTACT_GAP = 1.0e-3
+
+
+@njit(cache=True, error_model="numpy")
+def _keep_out(
+    x: np.ndarray,
+    old: np.ndarray,
+    first: int,
+    obstacle: Obstacle,
+    tau: float,
+    inverse_mass: np.ndarray,
+    spacing: float,
+    iterations: int,
+    edges: np.ndarray,
+    work: np.ndarray,
+    pinned: np.ndarray,
+    held: np.ndarray,
+    saved: np.ndarray,
+    scratch: np.ndarray,
+) -> int:
+    """Push the chain ``x`` out of the bell's shell and restore its lengths, Eq. (T15-T17): up to
+    ``CONTACT_ROUNDS`` times, put the particles inside back on the surface (:func:`push_out`),
+    then project the lengths again with every particle pushed so far held (its inverse mass
+    scaled by the first of ``HELD_WEIGHTS`` under which the projection converges), so that the
+    rest of the chain follows them: the rounds alternate between the two constraints, as
+    position-based dynamics does (Muller et al., J. Vis. Commun. Image R. 18, 2007). The lengths
+    are exact on return; a particle may be left inside where the two constraints cannot both be
+    met (a root under the wall that sweeps over its chain). Returns the most projection iterations
+    of the step, or -1 if a projection failed."""
+    pinned[:] = False
+    for _round in range(CONTACT_ROUNDS):
+        if push_out(x, old, first, obstacle, tau, pinned, scratch, CONTACT_GAP * spacing) == 0:
+            break
+        saved[:] = x
+        done = -1
+        for weight in HELD_WEIGHTS:
+            for i in range(x.shape[0]):
+                held[i] = weight * inverse_mass[i] if pinned[i] else inverse_mass[i]
+            done = project_lengths(
+                x, held, spacing, PROJECTION_TOLERANCE, PROJECTION_MAX_ITERATIONS, edges, work
+            )
+            if done >= 0:
+                break
+            x[:] = saved  # too stiff a projection to converge: hold the pushed ones less
+        if done < 0:
+            return -1
+        iterations = max(iterations, done)
+    return iterations
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
 def advance_frame(
     positions: np.ndarray,
@@ -708,7 +766,7 @@ def advance_frame(
     summed over the substeps, ``dt k (u - v)`` with the gain of the step and the velocity of its
     solve (added to what it holds; the reaction that two-way coupling gives the water).
     ``obstacle``: the bell's shell over the frame, which the free particles are kept out of
-    after each substep's projection (Eq. T15-T16; :func:`jellysim.tentacle.contact.no_obstacle`
+    after each substep's projection (Eq. T15-T17; :func:`jellysim.tentacle.contact.no_obstacle`
     for none).
     """
     n_chains = positions.shape[0]
@@ -724,6 +782,7 @@ def advance_frame(
     slender = model.drag_law == DRAG_SLENDER
     flow_last = flow.shape[2] - 1  # 0: one water velocity per chain; P - 1: one per particle
     record = drag_impulse.shape[1] > 0
+    contact = obstacle.faces.shape[0] > 0
     for t in prange(n_chains):
         x = positions[t]
         v = velocities[t]
@@ -746,6 +805,12 @@ def advance_frame(
         slender_work = np.empty((2, 3))
         # Per particle, the step's drag gains: k (sphere) or k_n, k_t and the tangent (slender).
         gains = np.zeros((n_particles if record else 0, 5))
+        # The contact's work space (Eq. T15-T17).
+        n_contact = n_particles if contact else 0
+        pinned = np.zeros(n_contact, dtype=np.bool_)
+        held = np.empty(n_contact)
+        saved = np.empty((n_contact, 3))
+        contact_scratch = np.empty((11, 3))
         worst_error = 0.0
         most_iterations = 0
         failed_at = -1
@@ -859,8 +924,12 @@ def advance_frame(
                 edges,
                 work,
             )
-            # Out of the bell's tissue, Eq. (T15-T16): the velocity below carries the wall's.
-            push_out(x, first, obstacle, (s + 1.0) / n_substeps)
+            if iterations >= 0 and contact:
+                # Out of the bell's tissue, Eq. (T15-T17): the velocity below carries the wall's.
+                iterations = _keep_out(
+                    x, old, first, obstacle, (s + 1.0) / n_substeps, model.inverse_mass, d,
+                    iterations, edges, work, pinned, held, saved, contact_scratch,
+                )  # fmt: skip
             # Velocities from the displacement, Eq. (T9).
             if first == 1:
                 for k in range(3):
