@@ -70,8 +70,9 @@ class SoftBellSimulation(Simulation):
         """Advance water, bell and tentacles to the next frame time."""
         c = self.coupling
         # The drawn skin at the frame's start: with the one at its end, the shell the tentacles
-        # are kept out of over the frame (bell.tentacle_contact).
-        start = c.skin.surface(c.position)
+        # are kept out of over the frame (bell.tentacle_contact); only where they are.
+        contact = self.tentacles is not None and self.scene.bell.tentacle_contact
+        start = c.skin.surface(c.position) if contact else None
         # Water and bell to the frame time: springs and muscle in MPS's explicit stage
         # (Eq. B8-B9, §4.2.2), the bell particles fluid particles in every other stage.
         self.coupling.advance((self.frame + 1) * self.frame_dt, self.frame_dt)
@@ -80,8 +81,9 @@ class SoftBellSimulation(Simulation):
         self.coupling.record(self.frame)
         # The tentacles through the frame, roots by cubic Hermite between records (Eq. B11).
         if self.tentacles is not None:
-            end = c.skin.surface(c.position)
-            self.tentacles.bell_shell = lambda frame: (start, end, c.skin.faces)
+            if start is not None:
+                shell = (start, c.skin.surface(c.position), c.skin.faces)
+                self.tentacles.bell_shell = lambda frame: shell
             self.tentacles.step_frame()
         self.notify()
 
