@@ -1,7 +1,9 @@
-"""Shared pytest set-up: tests marked ``slow`` run only with ``--runslow``."""
+"""Shared pytest set-up: one floating-point path on every x86-64 host (``pinning``, imported
+before anything loads NumPy), and tests marked ``slow`` run only with ``--runslow``."""
 
 from __future__ import annotations
 
+import pinning  # noqa: F401  (first: it sets the environment NumPy and Numba read on import)
 import pytest
 
 

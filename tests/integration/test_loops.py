@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scenes
+from pinning import NOT_PINNED, PINNED
 from regression.cases import CASES, preset_of
 from regression.compare import REFERENCE_FOLDER
 
@@ -42,6 +43,7 @@ def test_every_preset_has_a_loop_and_a_reference_case() -> None:
     assert set(LOOPS) == {"tentacles", "fluid", "soft-bell"}
 
 
+@pytest.mark.skipif(not PINNED, reason=NOT_PINNED)
 @pytest.mark.parametrize("name", list(CASES))
 def test_simulation_steps_any_scene_like_a_run(name: str) -> None:
     source, overrides = CASES[name]

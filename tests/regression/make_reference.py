@@ -2,7 +2,8 @@
 
 Run once, before a behaviour-preserving change, from the repository root:
 ``.venv/bin/python tests/regression/make_reference.py [CASE ...]``. Re-storing a reference is a
-deliberate change of behaviour and is said so in its commit.
+deliberate change of behaviour and is said so in its commit. The runs take the tests' pinned
+floating-point path (``tests/pinning.py``).
 """
 
 from __future__ import annotations
@@ -11,15 +12,18 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: scenes.py, pinning.py
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: scenes.py
+from pinning import NOT_PINNED, PINNED  # noqa: E402, I001  (first: before NumPy loads)
 
+import numpy as np  # noqa: E402
 from regression.cases import CASES  # noqa: E402
 from regression.compare import REFERENCE_FOLDER, read_all, run_case  # noqa: E402
 
 
 def main(names: list[str]) -> None:
+    if not PINNED:
+        sys.exit(f"not stored: {NOT_PINNED}")
     REFERENCE_FOLDER.mkdir(exist_ok=True)
     for name in names or list(CASES):
         with tempfile.TemporaryDirectory() as folder:
