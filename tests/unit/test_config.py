@@ -264,17 +264,24 @@ def test_bad_colors_are_refused(value: object) -> None:
 
 def test_a_recorded_soft_bell_without_root_placement_hung_its_roots_from_the_particles() -> None:
     """Scene texts written before ``bell.root_placement`` (issue 25) are read as the runs that
-    wrote them ran: a mass-spring bell's roots at its particles, not the new "surface" default;
-    a kinematic bell's text is left alone (the key does nothing there), and a recorded key is
-    kept."""
+    wrote them ran: a mass-spring bell's roots at its particles, not the "edge" default; a
+    kinematic bell's text is left alone (the key does nothing there), and a recorded key is kept
+    (a text of the "surface" days reads as "surface")."""
     from jellysim.config.load import recorded_tree, same_scene
 
     soft = load_scene("moon-jelly")
     text = scene_to_toml(soft)
-    assert 'root_placement = "surface"' in text
-    old = text.replace('root_placement = "surface"\n', "")
+    assert 'root_placement = "edge"' in text
+    old = text.replace('root_placement = "edge"\n', "")
     assert scene_from_tree(recorded_tree(old)).bell.root_placement == "particles"
-    assert scene_from_tree(recorded_tree(text)).bell.root_placement == "surface"
+    assert scene_from_tree(recorded_tree(text)).bell.root_placement == "edge"
+    surface = text.replace('root_placement = "edge"', 'root_placement = "surface"')
+    assert scene_from_tree(recorded_tree(surface)).bell.root_placement == "surface"
     assert not same_scene(old, text)
+    assert not same_scene(surface, text)
     kinematic = scene_to_toml(load_scene("brown-jelly"))
-    assert same_scene(kinematic.replace('root_placement = "surface"\n', ""), kinematic)
+    assert same_scene(kinematic.replace('root_placement = "edge"\n', ""), kinematic)
+    # where the key does nothing, a text of the "surface" days is today's scene (it resumes)
+    for name in ("brown-jelly", "dam-break-2d"):
+        text = scene_to_toml(load_scene(name))
+        assert same_scene(text.replace('"edge"', '"surface"'), text), name

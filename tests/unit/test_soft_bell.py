@@ -190,8 +190,9 @@ def test_muscle_cycle_is_periodic_continuous_and_full(bell: SoftBell) -> None:
 
 
 def test_roots_sit_on_the_margin_and_hang_down_at_rest(
-    scene: jellysim.Scene, bell: SoftBell, margin: RecordedMargin
+    scene: jellysim.Scene, bell: SoftBell, margin: RecordedMargin, skin: BellSkin
 ) -> None:
+    assert scene.bell.root_placement == "edge"  # the default
     roots, velocities, directions = margin.roots(np.array([0.0]))
     assert roots.shape == (1, scene.tentacles.count, 3)
     np.testing.assert_allclose(velocities, 0.0)
@@ -202,28 +203,94 @@ def test_roots_sit_on_the_margin_and_hang_down_at_rest(
     expected = 2 * np.pi * np.arange(scene.tentacles.count) / scene.tentacles.count
     # The Gaussian means of square-lattice cells sit within a hundredth of a radian of the angle.
     np.testing.assert_allclose(np.angle(np.exp(1j * (angles - expected))), 0.0, atol=0.01)
-    rho = np.hypot(relative[:, 0], relative[:, 1])
+    # Each root is its margin sample carried down and out (Eq. B10b) onto the drawn margin's
+    # outer edge, the outer ellipsoid's lowest ring at the bell's radius.
+    samples = margin.margin(0.0)[:: margin.root_every]
+    drop = margin.drop[:: margin.root_every]
+    reach = margin.reach[:: margin.root_every]
     w = scene.bell.thickness * scene.bell.height
-    assert np.all((rho > scene.bell.radius - w - L0) & (rho < scene.bell.radius))
-    # Each root is its margin sample dropped along -z onto the underside of the drawn surface:
-    # the lowest particle layer lies half a spacing inside the tissue (issue 25).
+    assert np.all((drop > 0.0) & (drop < L0))
+    assert np.all((reach > 0.0) & (reach < w + L0))
+    radial = relative / np.hypot(relative[:, 0], relative[:, 1])[:, None]
+    radial[:, 2] = 0.0
+    np.testing.assert_allclose(
+        roots[0], samples - drop[:, None] * [0.0, 0.0, 1.0] + reach[:, None] * radial, atol=1e-12
+    )
+    rim = skin.rim()[:: margin.root_every]
+    # (the radial reach from a sample a hundredth of a radian off its meridian: rho within 1e-4)
+    np.testing.assert_allclose(np.hypot(relative[:, 0], relative[:, 1]), scene.bell.radius,
+                               rtol=1e-4)  # fmt: skip
+    np.testing.assert_allclose(roots[0][:, 2], rim[:, 2], atol=1e-12)
+
+
+def test_edge_roots_hang_from_the_drawn_margins_outer_edge(
+    margin: RecordedMargin, skin: BellSkin
+) -> None:
+    """Nothing of the drawn bell lies below an edge root or outside it: a point a little below
+    the root, or out and below, is outside the tissue; the wall begins just in and up from it."""
+    roots = margin.roots(np.array([0.0]))[0][0]
+    vertices, faces = skin.rest_surface, skin.faces
+    radial = roots - skin.rest_surface[0]
+    radial[:, 2] = 0.0
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    down = np.array([0.0, 0.0, 1.0])
+    for offset in (-0.01 * L0 * down, 0.01 * L0 * (radial - down), -L0 * down):
+        np.testing.assert_array_equal(depth_inside(roots + offset, vertices, faces), 0.0)
+    assert np.all(depth_inside(roots + 0.1 * L0 * (down - 2.0 * radial), vertices, faces) > 0.0)
+
+
+def test_surface_roots_start_on_the_underside_of_the_drawn_bell() -> None:
+    """``"surface"`` (the default before "edge"): each root is its margin sample dropped along
+    -z onto the underside of the drawn surface. A point just above a root is in the bell's
+    tissue, the root itself and a point just below it are not."""
+    scene = jellysim.load_scene(
+        scenes.one_table("moon-jelly"), {**SMALL, "bell.root_placement": "surface"}
+    )
+    coupled = BellInFluid(scene)
+    margin, skin = coupled.margin, coupled.skin
+    roots = margin.roots(np.array([0.0]))[0][0]
     samples = margin.margin(0.0)[:: margin.root_every]
     drop = margin.drop[:: margin.root_every]
     assert np.all((drop > 0.0) & (drop < L0))
-    np.testing.assert_allclose(roots[0], samples - drop[:, None] * [0.0, 0.0, 1.0], atol=1e-15)
-
-
-def test_roots_start_on_the_underside_of_the_drawn_bell(
-    margin: RecordedMargin, skin: BellSkin
-) -> None:
-    """A point just above a root is in the bell's tissue, the root itself and a point just
-    below it are not: the tentacle hangs from the surface, not from inside the wall."""
-    roots = margin.roots(np.array([0.0]))[0][0]
+    np.testing.assert_array_equal(margin.reach, 0.0)
+    np.testing.assert_allclose(roots, samples - drop[:, None] * [0.0, 0.0, 1.0], atol=1e-15)
     up = np.array([0.0, 0.0, 1e-6 * L0])
     vertices, faces = skin.rest_surface, skin.faces
     assert np.all(depth_inside(roots + 100 * up, vertices, faces) > 0.0)
     np.testing.assert_allclose(depth_inside(roots + up, vertices, faces), 1e-6 * L0, rtol=1e-3)
     np.testing.assert_array_equal(depth_inside(roots - up, vertices, faces), 0.0)
+
+
+def test_edge_root_velocity_carries_the_walls_turn(coupled: BellInFluid) -> None:
+    """Eq. B10b: the recorded root velocity is the derivative of the recorded root position
+    along a motion of the bell's particles, the offsets' turn with the wall included. The
+    motion turns every meridian's section about a horizontal circle (an axisymmetric field,
+    as a contraction's inward turn of the margin) and drifts the bell."""
+    bell, margin = coupled.body, coupled.margin
+    rest = bell.rest
+    centre = bell.shape.centre
+    relative = rest - centre
+    rho = np.hypot(relative[:, 0], relative[:, 1])
+    radial = np.zeros_like(rest)
+    radial[:, :2] = relative[:, :2] / rho[:, None]
+    pivot_rho, pivot_z = 0.5 * bell.shape.radius, 0.5 * bell.shape.height
+    turn = 0.8  # rad/s: the margin swings inward and up about the circle
+    field = (-turn * (relative[:, 2] - pivot_z))[:, None] * radial
+    field[:, 2] += turn * (rho - pivot_rho)
+    field += [0.01, -0.02, 0.05]
+    eps = 1e-6
+    found = []
+    for frame, sign in ((1, 1.0), (2, -1.0), (3, 0.0)):
+        margin.record(frame, rest + sign * eps * field, field)
+        found.append(margin.records[frame])
+    derivative = (found[0].roots - found[1].roots) / (2 * eps)
+    recorded = found[2].velocities
+    scale = np.abs(derivative).max()
+    np.testing.assert_allclose(recorded, derivative, atol=2e-3 * scale)
+    # The turn's term matters here: the margin samples' own velocity is well off the derivative.
+    sample_velocity = (margin._margin_weights @ field)[:: margin.root_every]
+    assert np.abs(sample_velocity - derivative).max() > 0.05 * scale
+    margin.restart(0, rest, np.zeros_like(rest))
 
 
 def test_depth_inside_a_closed_surface() -> None:

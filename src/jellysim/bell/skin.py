@@ -52,6 +52,12 @@ class BellSkin:
         )
         return vertices + shape.centre
 
+    def rim(self) -> np.ndarray:
+        """The outer edge of the drawn margin at rest, one vertex per meridian (sectors, 3) m:
+        the outer ellipsoid's lowest ring."""
+        first = 1 + (MESH_RINGS - 1) * self.sectors
+        return self.rest_surface[first : first + self.sectors]
+
     def _skin_weights(self, reach: float) -> sparse.csr_matrix:
         """(V, B) weights, rows summing to 1, of the particles within ``reach`` (m) of each rest
         vertex, ``(1 - d / r)^2`` (Eq. B12); the nearest particle if none is that close."""

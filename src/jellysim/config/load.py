@@ -653,7 +653,9 @@ def recorded_tree(text: str) -> Tree:
     since records every key), and the one flow then was the paper's, "bell" (not the "auto"
     default, which gives a soft bell in MPS water the simulated water); one with a mass-spring
     bell but no ``bell.root_placement`` hung its tentacles from its particles ("particles",
-    issue 25); one with a bell but no ``bell.tentacle_contact`` let them pass into it (false)."""
+    issue 25), and where the bell is not a mass-spring one the key, which does nothing there,
+    is dropped (read at today's default); one with a bell but no ``bell.tentacle_contact`` let
+    them pass into it (false)."""
     tree = tomllib.loads(text)
     flow = tree.get("flow")
     if flow is None or (isinstance(flow, dict) and "model" not in flow):
@@ -663,6 +665,10 @@ def recorded_tree(text: str) -> Tree:
     if soft and isinstance(bell, dict) and "root_placement" not in bell:
         # issue 25: before the key, a soft bell's roots hung from its particles
         tree["bell"] = {**bell, "root_placement": "particles"}
+    elif isinstance(bell, dict) and not soft and "root_placement" in bell:
+        # the key acts on a mass-spring bell alone: elsewhere whatever default a text recorded
+        # ("surface" before "edge") reads as today's, so those runs still resume
+        tree["bell"] = {key: value for key, value in bell.items() if key != "root_placement"}
     bell = tree.get("bell")
     if isinstance(bell, dict) and bell.get("model", "none") != "none":
         if "tentacle_contact" not in bell:

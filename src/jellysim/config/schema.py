@@ -421,13 +421,15 @@ class Bell:
         "step)",
     )
     root_placement: str = param(
-        "surface",
+        "edge",
         kind="choice",
-        choices=("surface", "particles"),
-        doc="mass-spring: where the marginal tentacles hang from: 'surface', the underside of "
-        "the drawn bell, so that no tentacle starts inside its wall (issue 25); 'particles', the "
-        "mean of the lowest particle layer, half a spacing inside the drawn tissue (the paper's "
-        "§4.2.4; what runs before the key had)",
+        choices=("edge", "surface", "particles"),
+        doc="mass-spring: where the marginal tentacles hang from: 'edge', the outer edge of the "
+        "drawn margin's underside, turning with the wall, so that the margin's inward turn does "
+        "not sweep its wall over the tentacles; 'surface', the underside of the drawn margin "
+        "below the lowest particle layer (the default from issue 25 until 'edge'); 'particles', "
+        "the mean of the lowest particle layer, half a spacing inside the drawn tissue (the "
+        "paper's §4.2.4; what runs before the key had)",
     )
     muscle_band: float = param(
         0.3,

@@ -19,7 +19,7 @@ from jellysim.bell.kinematic import sector_count
 from jellysim.bell.skin import BellSkin
 from jellysim.bell.soft import BellShape, SoftBell
 from jellysim.config.schema import Scene
-from jellysim.coupling.margin import RecordedMargin, depth_inside
+from jellysim.coupling.margin import RecordedMargin, depth_inside, edge_offsets
 from jellysim.coupling.water_at import spread_reaction
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
@@ -83,7 +83,11 @@ class BellInFluid:
         self.margin = RecordedMargin(
             shape, rest, l0, sectors, layout, 1.0 / scene.fps, self.body.forcing()
         )
-        if scene.bell.root_placement == "surface":
+        placement = scene.bell.root_placement
+        if placement == "edge":
+            # The margin roots start on the drawn margin's outer edge (issues 25-26).
+            self.margin.set_drop(*edge_offsets(self.margin.rest_margin, self.skin.rim()))
+        elif placement == "surface":
             # The margin roots start on the drawn surface's underside, not in the wall (issue 25).
             self.margin.set_drop(
                 depth_inside(self.margin.rest_margin, self.skin.rest_surface, self.skin.faces)

@@ -12,7 +12,10 @@ The lowest layer's particles sit half a spacing inside the tissue that the skin 
 so a root at their mean would start its tentacle inside the bell's wall. Each margin root is
 therefore moved along its clamp direction by ``drop``, the rest depth of its margin sample
 inside the drawn surface (:func:`depth_inside`): at rest it sits on the underside of the drawn
-margin, and the drop turns with the wall (issue 25: no tentacle through the bell).
+margin, and the drop turns with the wall (issue 25: no tentacle through the bell). Under
+``bell.root_placement = "edge"`` it is moved on, outward across its clamp direction by ``reach``,
+to the drawn margin's outer edge, so that no drawn underside lies outside the root for the
+margin's inward turn to sweep down over the chain (issues 25-26).
 """
 
 from __future__ import annotations
@@ -79,15 +82,20 @@ class RecordedMargin:
         )
         self.rest_margin = self._margin_weights @ rest
         self.drop = np.zeros(sectors)
+        self.reach = np.zeros(sectors)
         self._rest_positions = rest
         self._rest_meridian = self._meridian_angles(rest)
         self.records: dict[int, Record] = {}
         self.record(0, rest, np.zeros_like(rest))
 
-    def set_drop(self, drop: np.ndarray) -> None:
-        """Move the margin roots by ``drop`` (R,) m along their clamp directions (the module's
-        docstring), and record the rest frame again with it."""
+    def set_drop(self, drop: np.ndarray, reach: np.ndarray | None = None) -> None:
+        """Move the margin roots by ``drop`` (R,) m along their clamp directions and, given
+        ``reach`` (R,) m, outward across them in their meridian planes (the module's docstring),
+        and record the rest frame again with it. With a reach the roots' velocities carry the
+        turn of these offsets with the wall (Eq. B10b)."""
         self.drop = np.asarray(drop, dtype=np.float64)
+        if reach is not None:
+            self.reach = np.asarray(reach, dtype=np.float64)
         rest = self._rest_positions
         self.restart(0, rest, np.zeros_like(rest))
 
@@ -106,14 +114,29 @@ class RecordedMargin:
 
     def _meridian_angles(self, positions: np.ndarray) -> np.ndarray:
         """Per sample: the angle of (margin point - upper point) in its meridian plane (R,)."""
+        d, radial = self._meridian_chords(positions)
+        return np.arctan2(np.einsum("ij,ij->i", d, radial), -d[:, 2])
+
+    def _meridian_chords(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample: (margin point - upper point) (R, 3) m and the sample's outward radial
+        direction (R, 3)."""
         margin = self._margin_weights @ positions
         upper = self._upper_weights @ positions
         axis_point = margin.mean(axis=0)
         radial = margin - axis_point
         radial[:, 2] = 0.0
         radial /= np.linalg.norm(radial, axis=1)[:, None]
-        d = margin - upper
-        return np.arctan2(np.einsum("ij,ij->i", d, radial), -d[:, 2])
+        return margin - upper, radial
+
+    def _turn_rates(self, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+        """Per sample: the rate (R,) rad/s at which the meridian angle turns, from the
+        particles' ``velocities``: d/dt atan2(p, q) = (q p' - p q') / (p^2 + q^2) with
+        p = d . radial, q = -d_z (the radial direction's own turn about the axis left out)."""
+        d, radial = self._meridian_chords(positions)
+        rate = self._margin_weights @ velocities - self._upper_weights @ velocities
+        p, q = np.einsum("ij,ij->i", d, radial), -d[:, 2]
+        dp, dq = np.einsum("ij,ij->i", rate, radial), -rate[:, 2]
+        return (q * dp - p * dq) / (p * p + q * q)
 
     def record(self, frame: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """Record what the bell particles at ``positions`` (B, 3) m moving at ``velocities``
@@ -128,13 +151,24 @@ class RecordedMargin:
         directions = np.sin(turn)[:, None] * radial
         directions[:, 2] -= np.cos(turn)
         bases = margin + self.drop[:, None] * directions if self.drop.any() else margin
+        base_velocity = margin_velocity
+        if self.reach.any():
+            # Eq. B10b: out across the clamp direction to the drawn margin's outer edge, and the
+            # two offsets' turn with the wall in the velocity (d t/d turn = n, d n/d turn = -t).
+            normals = np.cos(turn)[:, None] * radial
+            normals[:, 2] += np.sin(turn)
+            bases = bases + self.reach[:, None] * normals
+            rate = self._turn_rates(positions, velocities)[:, None]
+            base_velocity = margin_velocity + rate * (
+                self.drop[:, None] * normals - self.reach[:, None] * directions
+            )
         if self.root_every or not self.tentacles:
             take = slice(0, None, self.root_every) if self.tentacles else slice(0, 0)
-            roots, root_velocities = bases[take], margin_velocity[take]
+            roots, root_velocities = bases[take], base_velocity[take]
             root_directions = directions[take]
         else:
             roots, root_velocities, root_directions = self._placed(
-                bases, margin, margin_velocity, directions
+                bases, base_velocity, margin, margin_velocity, directions
             )
         self.records[frame] = Record(
             roots,
@@ -149,13 +183,15 @@ class RecordedMargin:
     def _placed(
         self,
         bases: np.ndarray,
+        base_velocity: np.ndarray,
         margin: np.ndarray,
         velocity: np.ndarray,
         directions: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Roots, their velocities and clamp directions (T, 3) at the layout's places: margin
-        roots between the samples' ``bases`` (the margin moved by the drop), mouth roots about
-        the ``margin``'s centre.
+        roots between the samples' ``bases`` (the margin moved by the drop and the reach) moving
+        at ``base_velocity``, mouth roots about the ``margin``'s centre, moving at the mean of
+        its samples' ``velocity``.
 
         A root whose angle falls on a sample (within 1e-9 of the sample step, as the even
         margin roots do) takes that sample itself, as one default group does: a group's roots
@@ -169,7 +205,7 @@ class RecordedMargin:
         w = np.where(on_sample, 0.0, x - below)[:, None]
         k = (j + 1) % self.sectors
         roots = (1.0 - w) * bases[j] + w * bases[k]
-        root_velocities = (1.0 - w) * velocity[j] + w * velocity[k]
+        root_velocities = (1.0 - w) * base_velocity[j] + w * base_velocity[k]
         d = (1.0 - w) * directions[j] + w * directions[k]
         root_directions = np.where(
             on_sample[:, None], directions[j], d / np.linalg.norm(d, axis=1)[:, None]
@@ -277,3 +313,16 @@ def depth_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) ->
         if len(above) % 2 == 1 and len(below):
             out[n] = p[2] - below.max()
     return out
+
+
+def edge_offsets(margin: np.ndarray, rim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The drop (R,) m, straight down, and the reach (R,) m, outward along the sample's radial
+    direction, that carry each sample of the rest ``margin`` (R, 3) m onto the drawn margin's
+    outer edge ``rim`` (R, 3) m (one vertex per sample, at the sample's angle): the offsets that
+    put a root on that edge (Eq. B10b)."""
+    centre = margin.mean(axis=0)
+    radial = margin - centre
+    radial[:, 2] = 0.0
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    gap = rim - margin
+    return -gap[:, 2], np.einsum("ij,ij->i", gap, radial)
