@@ -114,26 +114,32 @@ class RecordedMargin:
 
     def _meridian_angles(self, positions: np.ndarray) -> np.ndarray:
         """Per sample: the angle of (margin point - upper point) in its meridian plane (R,)."""
-        d, radial = self._meridian_chords(positions)
-        return np.arctan2(np.einsum("ij,ij->i", d, radial), -d[:, 2])
+        _, chord, radial = self._chords(positions)
+        return _meridian_angle(chord, radial)
 
-    def _meridian_chords(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per sample: (margin point - upper point) (R, 3) m and the sample's outward radial
-        direction (R, 3)."""
+    def _chords(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per sample: the margin point (R, 3) m, the chord (margin point - upper point) (R, 3) m
+        and the sample's outward radial direction (R, 3)."""
         margin = self._margin_weights @ positions
         upper = self._upper_weights @ positions
-        axis_point = margin.mean(axis=0)
-        radial = margin - axis_point
+        radial = margin - margin.mean(axis=0)
         radial[:, 2] = 0.0
         radial /= np.linalg.norm(radial, axis=1)[:, None]
-        return margin - upper, radial
+        return margin, margin - upper, radial
 
-    def _turn_rates(self, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-        """Per sample: the rate (R,) rad/s at which the meridian angle turns, from the
-        particles' ``velocities``: d/dt atan2(p, q) = (q p' - p q') / (p^2 + q^2) with
-        p = d . radial, q = -d_z (the radial direction's own turn about the axis left out)."""
-        d, radial = self._meridian_chords(positions)
-        rate = self._margin_weights @ velocities - self._upper_weights @ velocities
+    def _turn_rates(
+        self,
+        chord: np.ndarray,
+        radial: np.ndarray,
+        margin_velocity: np.ndarray,
+        velocities: np.ndarray,
+    ) -> np.ndarray:
+        """Per sample: the rate (R,) rad/s at which the meridian angle of ``chord`` turns, from
+        the margin samples' velocity and the particles' ``velocities``: d/dt atan2(p, q) =
+        (q p' - p q') / (p^2 + q^2) with p = chord . radial, q = -chord_z (the radial
+        direction's own turn about the axis left out)."""
+        d = chord
+        rate = margin_velocity - self._upper_weights @ velocities
         p, q = np.einsum("ij,ij->i", d, radial), -d[:, 2]
         dp, dq = np.einsum("ij,ij->i", rate, radial), -rate[:, 2]
         return (q * dp - p * dq) / (p * p + q * q)
@@ -142,12 +148,9 @@ class RecordedMargin:
         """Record what the bell particles at ``positions`` (B, 3) m moving at ``velocities``
         drive at ``frame``: roots, clamp directions, margin polyline, mean velocity (Eq. B10).
         Only the last two frames are kept."""
-        margin = self._margin_weights @ positions
+        margin, chord, radial = self._chords(positions)
         margin_velocity = self._margin_weights @ velocities
-        turn = self._meridian_angles(positions) - self._rest_meridian
-        radial = margin - margin.mean(axis=0)
-        radial[:, 2] = 0.0
-        radial /= np.linalg.norm(radial, axis=1)[:, None]
+        turn = _meridian_angle(chord, radial) - self._rest_meridian
         directions = np.sin(turn)[:, None] * radial
         directions[:, 2] -= np.cos(turn)
         bases = margin + self.drop[:, None] * directions if self.drop.any() else margin
@@ -158,7 +161,7 @@ class RecordedMargin:
             normals = np.cos(turn)[:, None] * radial
             normals[:, 2] += np.sin(turn)
             bases = bases + self.reach[:, None] * normals
-            rate = self._turn_rates(positions, velocities)[:, None]
+            rate = self._turn_rates(chord, radial, margin_velocity, velocities)[:, None]
             base_velocity = margin_velocity + rate * (
                 self.drop[:, None] * normals - self.reach[:, None] * directions
             )
@@ -275,6 +278,12 @@ class RecordedMargin:
         """1 - (mean margin radius at the last record) / (at rest), from the margin polyline."""
         margin = self.records[max(self.records)].margin
         return 1.0 - _ring_radius(margin) / _ring_radius(self.rest_margin)
+
+
+def _meridian_angle(chord: np.ndarray, radial: np.ndarray) -> np.ndarray:
+    """The angle (R,) of each ``chord`` (R, 3) from straight down, towards its ``radial``
+    direction (R, 3), in its meridian plane."""
+    return np.arctan2(np.einsum("ij,ij->i", chord, radial), -chord[:, 2])
 
 
 def _hermite(s: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
