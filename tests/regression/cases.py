@@ -51,9 +51,10 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
     ),
     # The paper's soft bell in the paper's assumed flow: moon-jelly as it was before issue 26
     # (its tentacles feel the simulated water since, and its bell is 16 times stiffer with a
-    # tapered muscle in a wider band), before its roots moved onto the drawn surface (issue 25)
-    # and before the tentacles were kept out of the bell (issues 25-26); this reference is the
-    # moon-jelly one stored before those changes.
+    # tapered muscle in a wider band), before its roots moved onto the drawn surface and its
+    # arms onto a stalk under the subumbrella (issue 25) and before the tentacles were kept out
+    # of the bell (issues 25-26); this reference is the moon-jelly one stored before those
+    # changes.
     "moon-jelly-paper-flow": (
         "moon-jelly",
         {
@@ -63,6 +64,7 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
             "bell.muscle_band": 0.3,
             "bell.muscle_taper": 0.0,
             "bell.root_placement": "particles",
+            "bell.arm_anchor": "margin",
             "bell.tentacle_contact": False,
         },
     ),

@@ -61,6 +61,7 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
             "bell.muscle_band": 0.3,  # the paper's uniform muscle band, until issue 26
             "bell.muscle_taper": 0.0,
             "bell.root_placement": "particles",  # the roots at the particles, until issue 25
+            "bell.arm_anchor": "margin",  # the arms on the margin plane, until issue 25
             "bell.tentacle_contact": False,  # nothing kept the tentacles out, until issues 25-26
             "duration": 0.4,
             "fps": 10.0,

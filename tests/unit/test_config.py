@@ -285,3 +285,25 @@ def test_a_recorded_soft_bell_without_root_placement_hung_its_roots_from_the_par
     for name in ("brown-jelly", "dam-break-2d"):
         text = scene_to_toml(load_scene(name))
         assert same_scene(text.replace('"edge"', '"surface"'), text), name
+
+
+def test_a_recorded_soft_bell_without_arm_anchor_hung_its_arms_from_the_margin_plane() -> None:
+    """Scene texts written before ``bell.arm_anchor`` (issue 25) are read as the runs that wrote
+    them ran: a mass-spring bell's oral arms on the margin plane, not from the "subumbrella"
+    default; a recorded key is kept; where the bell is not a mass-spring one the key does
+    nothing and a text without it is today's scene."""
+    from jellysim.config.load import recorded_tree, same_scene
+
+    text = scene_to_toml(load_scene("moon-jelly"))
+    assert 'arm_anchor = "subumbrella"' in text
+    old = text.replace('arm_anchor = "subumbrella"\n', "")
+    assert scene_from_tree(recorded_tree(old)).bell.arm_anchor == "margin"
+    assert scene_from_tree(recorded_tree(text)).bell.arm_anchor == "subumbrella"
+    plane = text.replace('arm_anchor = "subumbrella"', 'arm_anchor = "margin"')
+    assert scene_from_tree(recorded_tree(plane)).bell.arm_anchor == "margin"
+    assert same_scene(old, plane)
+    assert not same_scene(old, text)
+    for name in ("brown-jelly", "purple-jelly", "dam-break-2d"):
+        text = scene_to_toml(load_scene(name))
+        assert same_scene(text.replace('arm_anchor = "subumbrella"\n', ""), text), name
+        assert same_scene(text.replace('"subumbrella"', '"margin"'), text), name

@@ -293,6 +293,71 @@ def test_edge_root_velocity_carries_the_walls_turn(coupled: BellInFluid) -> None
     margin.restart(0, rest, np.zeros_like(rest))
 
 
+@pytest.fixture(scope="module")
+def armed() -> dict[str, BellInFluid]:
+    """The small bell with the moon-jelly preset's four oral arms at the mouth, their roots
+    carried from the drawn underside's centre (the default) and from the margin plane."""
+    return {
+        anchor: BellInFluid(jellysim.load_scene("moon-jelly", {**SMALL, "bell.arm_anchor": anchor}))
+        for anchor in ("subumbrella", "margin")
+    }
+
+
+def _flattened(coupled: BellInFluid) -> tuple[np.ndarray, np.ndarray]:
+    """The bell's particles pressed to a fifth of their height with the margin lifted to the
+    middle of the squashed wall near the axis (moon-jelly's bell against the water's surface,
+    docs/figures.md note 8, in caricature), and a motion field (m/s) of that kind."""
+    shape, rest = coupled.body.shape, coupled.body.rest
+    relative = rest - shape.centre
+    rho2 = (relative[:, 0] ** 2 + relative[:, 1] ** 2) / shape.radius**2
+    lift = 0.2 * (shape.height - 0.5 * shape.wall)
+    field = np.zeros_like(rest)
+    field[:, 2] = -0.8 * relative[:, 2] + lift * rho2
+    return rest + field, field
+
+
+def test_oral_arms_hang_from_the_drawn_undersides_centre(armed: dict[str, BellInFluid]) -> None:
+    """Eq. B10c: at rest the arms' roots sit on their circle in the margin plane, the anchor
+    or none; as the bell deforms they keep their stalk below the drawn underside's centre
+    (the inner apex), moving at its velocity. Pressed flat with its margin lifted, a bell's
+    margin plane lies in its own wall over the axis: roots on that plane are in the drawn
+    tissue, roots on the stalk are below it."""
+    stalked, plane = armed["subumbrella"], armed["margin"]
+    mouth = stalked.margin.layout.mouth
+    assert mouth.sum() == 4
+    at_rest = [c.margin.roots(np.array([0.0]))[0][0][mouth] for c in (stalked, plane)]
+    np.testing.assert_allclose(at_rest[0], at_rest[1], rtol=0, atol=1e-12)
+    centre = stalked.margin.rest_margin.mean(axis=0)
+    np.testing.assert_allclose(at_rest[1][:, 2], centre[2], atol=1e-12)
+    skin = stalked.skin
+    vertices, faces = skin.rest_surface, skin.faces
+    stalk = skin.rest_surface[-1] - at_rest[0]  # up to the inner apex
+    shape = stalked.body.shape
+    inner_apex = shape.centre[2] + shape.height - shape.wall
+    np.testing.assert_allclose(stalk[:, 2], inner_apex - centre[2], atol=1e-12)
+    positions, field = _flattened(stalked)
+    for c in (stalked, plane):
+        c.margin.record(1, positions, field)
+    roots = [c.margin.records[1].roots[mouth] for c in (stalked, plane)]
+    apex = skin.surface(positions)[-1]
+    np.testing.assert_allclose(roots[0] + stalk, np.broadcast_to(apex, roots[0].shape), atol=1e-12)
+    np.testing.assert_allclose(
+        stalked.margin.records[1].velocities[mouth],
+        np.broadcast_to(skin.surface(skin.rest + field)[-1] - skin.rest_surface[-1], (4, 3)),
+        atol=1e-12,
+    )  # the field is the motion's velocity: the apex's is the skin's displacement under it
+    drawn = skin.surface(positions)
+    assert np.all(depth_inside(roots[1], drawn, faces) > 0.0)  # the margin plane: in the wall
+    np.testing.assert_array_equal(depth_inside(roots[0], drawn, faces), 0.0)
+    # ... and under the tissue that is straight above them
+    above = np.linalg.norm((drawn - roots[0][:, None])[..., :2], axis=2) < 0.5 * L0
+    for k in range(4):
+        assert drawn[above[k], 2].min() > roots[0][k, 2]
+    np.testing.assert_array_equal(depth_inside(at_rest[0], vertices, faces), 0.0)
+    for c in (stalked, plane):
+        c.margin.restart(0, c.body.rest, np.zeros_like(c.body.rest))
+
+
 def test_depth_inside_a_closed_surface() -> None:
     """The depth below a point down to the surface, for points inside a unit cube; 0 outside."""
     corners = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])

@@ -58,6 +58,12 @@ class BellSkin:
         first = 1 + (MESH_RINGS - 1) * self.sectors
         return self.rest_surface[first : first + self.sectors]
 
+    def underside_centre(self) -> tuple[sparse.csr_matrix, np.ndarray]:
+        """The drawn underside's centre, the inner ellipsoid's apex (the mesh's last vertex):
+        its (1, B) weights over the particles' displacements from rest and its rest point (3,)
+        m. It moves as :meth:`surface` moves that vertex."""
+        return self._weights[-1:], self.rest_surface[-1].copy()
+
     def _skin_weights(self, reach: float) -> sparse.csr_matrix:
         """(V, B) weights, rows summing to 1, of the particles within ``reach`` (m) of each rest
         vertex, ``(1 - d / r)^2`` (Eq. B12); the nearest particle if none is that close."""

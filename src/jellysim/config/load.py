@@ -647,14 +647,20 @@ def scene_to_toml(scene: Scene) -> str:
     return tomli_w.dumps(scene_to_tree(scene))
 
 
+# The mass-spring bell's keys whose defaults changed (issue 25), with what a soft bell did
+# before the key existed.
+SOFT_BELL_KEYS_BEFORE = (("root_placement", "particles"), ("arm_anchor", "margin"))
+
+
 def recorded_tree(text: str) -> Tree:
     """The tree of a scene text that a result or a checkpoint recorded, read as the run that
     wrote it ran: a text without ``flow.model`` predates the key (issue 26; every text written
     since records every key), and the one flow then was the paper's, "bell" (not the "auto"
     default, which gives a soft bell in MPS water the simulated water); one with a mass-spring
     bell but no ``bell.root_placement`` hung its tentacles from its particles ("particles",
-    issue 25), and where the bell is not a mass-spring one the key, which does nothing there,
-    is dropped (read at today's default); one with a bell but no ``bell.tentacle_contact`` let
+    issue 25), one without ``bell.arm_anchor`` its oral arms from the margin plane ("margin",
+    issue 25), and where the bell is not a mass-spring one these keys, which do nothing there,
+    are dropped (read at today's default); one with a bell but no ``bell.tentacle_contact`` let
     them pass into it (false)."""
     tree = tomllib.loads(text)
     flow = tree.get("flow")
@@ -662,13 +668,14 @@ def recorded_tree(text: str) -> Tree:
         tree["flow"] = {**(flow or {}), "model": "bell"}
     bell = tree.get("bell")
     soft = isinstance(bell, dict) and bell.get("model") == "mass-spring"
-    if soft and isinstance(bell, dict) and "root_placement" not in bell:
-        # issue 25: before the key, a soft bell's roots hung from its particles
-        tree["bell"] = {**bell, "root_placement": "particles"}
-    elif isinstance(bell, dict) and not soft and "root_placement" in bell:
-        # the key acts on a mass-spring bell alone: elsewhere whatever default a text recorded
-        # ("surface" before "edge") reads as today's, so those runs still resume
-        tree["bell"] = {key: value for key, value in bell.items() if key != "root_placement"}
+    # issue 25: before the keys, a soft bell's roots hung from its particles and its arms from
+    # the margin plane; the keys act on a mass-spring bell alone: elsewhere whatever default a
+    # text recorded ("surface" before "edge") reads as today's, so those runs still resume
+    for name, before in SOFT_BELL_KEYS_BEFORE:
+        if soft and isinstance(bell, dict) and name not in bell:
+            bell = tree["bell"] = {**bell, name: before}
+        elif isinstance(bell, dict) and not soft and name in bell:
+            bell = tree["bell"] = {key: value for key, value in bell.items() if key != name}
     bell = tree.get("bell")
     if isinstance(bell, dict) and bell.get("model", "none") != "none":
         if "tentacle_contact" not in bell:
@@ -682,9 +689,9 @@ def same_scene(first: str, second: str) -> bool:
     under today's schema: a key that one text lacks takes its default. A key added to jellysim
     later is written into every new text at its default, which keeps the older behaviour; that
     changes the text, not the scene (docs/decisions.md, "Slender drag and currents"), except
-    ``flow.model``, ``bell.root_placement`` and ``bell.tentacle_contact``, whose defaults are no
-    longer what older texts ran (:func:`recorded_tree`). A
-    text that does not read as a scene is no match."""
+    ``flow.model``, ``bell.root_placement``, ``bell.arm_anchor`` and ``bell.tentacle_contact``,
+    whose defaults are no longer what older texts ran (:func:`recorded_tree`). A text that does
+    not read as a scene is no match."""
     if first == second:
         return True
     try:

@@ -431,6 +431,16 @@ class Bell:
         "the mean of the lowest particle layer, half a spacing inside the drawn tissue (the "
         "paper's §4.2.4; what runs before the key had)",
     )
+    arm_anchor: str = param(
+        "subumbrella",
+        kind="choice",
+        choices=("subumbrella", "margin"),
+        doc="mass-spring: what the oral arms (groups placed at the 'mouth') hang from: "
+        "'subumbrella', the centre of the drawn underside, by a stalk (the manubrium) as long as "
+        "that centre stands above the margin plane at rest, so that the arms stay under the "
+        "bell however it deforms; 'margin', their circle in the margin plane about its centre "
+        "(what runs before the key had)",
+    )
     muscle_band: float = param(
         0.3,
         gt=0.0,

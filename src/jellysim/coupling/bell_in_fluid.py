@@ -92,6 +92,9 @@ class BellInFluid:
             self.margin.set_drop(
                 depth_inside(self.margin.rest_margin, self.skin.rest_surface, self.skin.faces)
             )
+        if scene.bell.arm_anchor == "subumbrella" and layout.any_mouth:
+            # The oral arms hang from the drawn underside's centre by a stalk (issue 25).
+            self.margin.set_mouth_anchor(*self.skin.underside_centre())
         # the springs' explicit limit, unless they are integrated implicitly
         self.spring_dt = self.body.stable_dt() if self.body.integration == "explicit" else math.inf
         self.stats = FrameStats()

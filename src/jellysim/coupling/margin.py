@@ -16,6 +16,12 @@ margin, and the drop turns with the wall (issue 25: no tentacle through the bell
 ``bell.root_placement = "edge"`` it is moved on, outward across its clamp direction by ``reach``,
 to the drawn margin's outer edge, so that no drawn underside lies outside the root for the
 margin's inward turn to sweep down over the chain (issues 25-26).
+
+Mouth roots (oral arms) sit on their circle about the margin's centre in the margin plane at
+rest. Under ``bell.arm_anchor = "subumbrella"`` the circle's centre is then carried by the drawn
+underside's centre (the inner apex of the skin, Eq. B12) at a fixed stalk below it, the
+manubrium, so that a bell whose margin rises above its own underside (pressed flat at the water's
+surface) does not close over the arms' roots (Eq. B10c).
 """
 
 from __future__ import annotations
@@ -51,7 +57,8 @@ class RecordedMargin:
     one-table scene every ``sectors // tentacles``-th sample is a root; otherwise a margin root
     is interpolated linearly in angle between the two samples about it, and a mouth root (oral
     arms) sits on its circle about the margin's centre in the margin plane, moving with the
-    margin's mean velocity and hanging along -z. Frames are ``frame_dt`` (s) apart;
+    margin's mean velocity and hanging along -z, or with a mouth anchor (:meth:`set_mouth_anchor`)
+    about the anchor's stalk. Frames are ``frame_dt`` (s) apart;
     ``forcing`` is the bell's (the scales of its pulse, for the tentacles' substep). ``drop``
     (R,) m per sample, zero until :meth:`set_drop`: how far a margin root lies along its clamp
     direction from the margin sample it is taken from (the module's docstring)."""
@@ -83,6 +90,7 @@ class RecordedMargin:
         self.rest_margin = self._margin_weights @ rest
         self.drop = np.zeros(sectors)
         self.reach = np.zeros(sectors)
+        self._anchor: tuple[sparse.csr_matrix, np.ndarray, np.ndarray] | None = None
         self._rest_positions = rest
         self._rest_meridian = self._meridian_angles(rest)
         self.records: dict[int, Record] = {}
@@ -96,6 +104,17 @@ class RecordedMargin:
         self.drop = np.asarray(drop, dtype=np.float64)
         if reach is not None:
             self.reach = np.asarray(reach, dtype=np.float64)
+        rest = self._rest_positions
+        self.restart(0, rest, np.zeros_like(rest))
+
+    def set_mouth_anchor(self, weights: sparse.csr_matrix, rest_point: np.ndarray) -> None:
+        """Carry the mouth roots' circle from the point that rests at ``rest_point`` (3,) m and
+        moves by ``weights`` (1, B) times the particles' displacement from rest (the drawn
+        underside's centre, :meth:`jellysim.bell.skin.BellSkin.underside_centre`), at the stalk
+        that joins it to the margin's centre at rest, and record the rest frame again with it
+        (Eq. B10c)."""
+        rest_point = np.asarray(rest_point, dtype=np.float64)
+        self._anchor = (weights, rest_point, self.rest_margin.mean(axis=0) - rest_point)
         rest = self._rest_positions
         self.restart(0, rest, np.zeros_like(rest))
 
@@ -170,8 +189,11 @@ class RecordedMargin:
             roots, root_velocities = bases[take], base_velocity[take]
             root_directions = directions[take]
         else:
+            centre, centre_velocity = self._mouth_centre(
+                margin, margin_velocity, positions, velocities
+            )
             roots, root_velocities, root_directions = self._placed(
-                bases, base_velocity, margin, margin_velocity, directions
+                bases, base_velocity, centre, centre_velocity, directions
             )
         self.records[frame] = Record(
             roots,
@@ -183,18 +205,35 @@ class RecordedMargin:
         for old in [k for k in self.records if k < frame - 1]:
             del self.records[old]
 
+    def _mouth_centre(
+        self,
+        margin: np.ndarray,
+        margin_velocity: np.ndarray,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The centre (3,) m of the mouth roots' circle and its velocity (3,) m/s: the mean of
+        the ``margin`` samples and of their ``margin_velocity``, or with a mouth anchor
+        (:meth:`set_mouth_anchor`) the anchor moved with the particles at ``positions`` (B, 3)
+        m and ``velocities``, plus the stalk (Eq. B10c)."""
+        if self._anchor is None:
+            return margin.mean(axis=0), margin_velocity.mean(axis=0)
+        weights, rest_point, stalk = self._anchor
+        moved = weights @ (positions - self._rest_positions)
+        return rest_point + moved[0] + stalk, (weights @ velocities)[0]
+
     def _placed(
         self,
         bases: np.ndarray,
         base_velocity: np.ndarray,
-        margin: np.ndarray,
-        velocity: np.ndarray,
+        centre: np.ndarray,
+        centre_velocity: np.ndarray,
         directions: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Roots, their velocities and clamp directions (T, 3) at the layout's places: margin
         roots between the samples' ``bases`` (the margin moved by the drop and the reach) moving
-        at ``base_velocity``, mouth roots about the ``margin``'s centre, moving at the mean of
-        its samples' ``velocity``.
+        at ``base_velocity``, mouth roots on their circle about ``centre`` (3,) m, moving at
+        ``centre_velocity`` (3,) m/s and hanging along -z.
 
         A root whose angle falls on a sample (within 1e-9 of the sample step, as the even
         margin roots do) takes that sample itself, as one default group does: a group's roots
@@ -215,12 +254,11 @@ class RecordedMargin:
         )
         m = layout.mouth
         if np.any(m):
-            centre = margin.mean(axis=0)
             radial = np.stack([np.cos(layout.angles[m]), np.sin(layout.angles[m])], axis=1)
             rest_radius = _ring_radius(self.rest_margin)
             roots[m] = centre
             roots[m, :2] += (layout.mouth_radius[m] * rest_radius)[:, None] * radial
-            root_velocities[m] = velocity.mean(axis=0)
+            root_velocities[m] = centre_velocity
             root_directions[m] = (0.0, 0.0, -1.0)
         return roots, root_velocities, root_directions
 
