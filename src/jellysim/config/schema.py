@@ -202,7 +202,8 @@ class Tentacles:
         choices=("margin", "mouth"),
         nullable=True,
         doc="where the roots sit: on the bell 'margin' (unset), or around the 'mouth' under "
-        "the bell, on a circle of mouth_radius in the margin plane (oral arms)",
+        "the bell, on a circle of mouth_radius in the margin plane (oral arms; a mass-spring "
+        "bell carries the circle by bell.arm_anchor)",
     )
     arrangement: str | None = param(
         None,

@@ -141,10 +141,7 @@ class RecordedMargin:
         and the sample's outward radial direction (R, 3)."""
         margin = self._margin_weights @ positions
         upper = self._upper_weights @ positions
-        radial = margin - margin.mean(axis=0)
-        radial[:, 2] = 0.0
-        radial /= np.linalg.norm(radial, axis=1)[:, None]
-        return margin, margin - upper, radial
+        return margin, margin - upper, _radial(margin)
 
     def _turn_rates(
         self,
@@ -367,9 +364,14 @@ def edge_offsets(margin: np.ndarray, rim: np.ndarray) -> tuple[np.ndarray, np.nd
     direction, that carry each sample of the rest ``margin`` (R, 3) m onto the drawn margin's
     outer edge ``rim`` (R, 3) m (one vertex per sample, at the sample's angle): the offsets that
     put a root on that edge (Eq. B10b)."""
-    centre = margin.mean(axis=0)
-    radial = margin - centre
+    gap = rim - margin
+    return -gap[:, 2], np.einsum("ij,ij->i", gap, _radial(margin))
+
+
+def _radial(margin: np.ndarray) -> np.ndarray:
+    """Each sample's outward horizontal direction (R, 3) from the centre of the ``margin``
+    samples (R, 3) m."""
+    radial = margin - margin.mean(axis=0)
     radial[:, 2] = 0.0
     radial /= np.linalg.norm(radial, axis=1)[:, None]
-    gap = rim - margin
-    return -gap[:, 2], np.einsum("ij,ij->i", gap, radial)
+    return radial
