@@ -39,6 +39,12 @@ class BellModel(RootDriver, Protocol):
         """Dataset paths that are the same data as another (path: target), stored as links."""
         return {}
 
+    def shell(self) -> tuple[Callable[[float], np.ndarray], np.ndarray] | None:
+        """The body's closed surface, which the tentacles are kept out of
+        (``bell.tentacle_contact``): its vertices (V, 3) m at a time (s) and its faces (F, 3);
+        None for a model without a body."""
+        return None
+
 
 BELL_MODELS: dict[str, Callable[[Scene], BellModel]] = {}
 

@@ -26,6 +26,7 @@ Here the hand-keyed curves are replaced by a parametric bell (docs/theory/bell.m
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -262,6 +263,9 @@ class KinematicBell(BellModel):
         return self.surface(time)[first : first + self.sectors]
 
     # The body (Eq. B1-B4).
+
+    def shell(self) -> tuple[Callable[[float], np.ndarray], np.ndarray]:
+        return self.surface, self.faces
 
     def surface(self, time: float) -> np.ndarray:
         """Vertices (V, 3) m of the closed shell at ``time`` (topology :attr:`faces`)."""

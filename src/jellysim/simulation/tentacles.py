@@ -337,9 +337,9 @@ class TentacleSimulation(Simulation):
         if driver is None:
             self.bell = make_root_driver(scene)
             driver = self.bell
-            surface = getattr(self.bell, "surface", None)
-            if surface is not None:
-                faces = self.bell.faces  # type: ignore[attr-defined]
+            shell = self.bell.shell()
+            if shell is not None:
+                surface, faces = shell
                 dt = self.frame_dt
                 self.bell_shell = lambda frame: (
                     surface(frame * dt),
