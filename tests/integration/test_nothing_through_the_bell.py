@@ -216,8 +216,10 @@ def test_the_moon_jelly_fringe_is_held_at_its_wall_at_the_presets_own_scale(
     and the roots under the wall (``bell.root_placement = "surface"``) up to 15 were, 7 mm deep:
     the drawn wall outside the roots swept down over their chains, and the lengths won. With
     the roots on the drawn margin's outer edge (the default, Eq. B10b) none is, in any frame;
-    the lengths are exact to the projection's tolerance and the fringe lies on the wall, held
-    there by the contact."""
+    the lengths are exact to the projection's tolerance and some of the fringe lies on the wall,
+    where the contact put it. (Kept on the wall's tangent planes, Eq. T17, the chains slide along
+    the wall and leave it where it lets them: 4 particles within 1 mm of it at t = 1 s; held where
+    they were pushed, as before 2026-11-27, 17 stuck to it.)"""
     with jellysim.run("moon-jelly", tmp_path, overrides={"duration": 1.0}) as result:
         assert result.scene.bell.root_placement == "edge"
         np.testing.assert_array_equal(inside_per_frame(result), 0)
@@ -225,4 +227,4 @@ def test_the_moon_jelly_fringe_is_held_at_its_wall_at_the_presets_own_scale(
         positions = result.read(fields.TENTACLE_POSITION)[:, : fringe.count, : fringe.particles]
         lengths = np.linalg.norm(np.diff(positions, axis=2), axis=-1)
         np.testing.assert_allclose(lengths, fringe.spacing, rtol=1e-9)
-        assert on_the_surface(result, result.frames - 1, 1e-3) >= 10
+        assert on_the_surface(result, result.frames - 1, 1e-3) >= 3

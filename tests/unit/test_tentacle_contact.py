@@ -3,6 +3,8 @@ bell's drawn shell is put on the nearest point of its surface, after each subste
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from shells import inside_closed_surface
@@ -17,7 +19,14 @@ from jellysim.tentacle.contact import (
     push_out,
     shell_obstacle,
 )
-from jellysim.tentacle.kernels import ChainModel, Medium, advance_frame
+from jellysim.tentacle.kernels import (
+    WALL_RELEASE_ABOVE,
+    ChainModel,
+    Medium,
+    advance_frame,
+    project_lengths,
+    project_on_walls,
+)
 from jellysim.tentacle.model import build_chain_model
 
 # A closed box [0, 1] x [0, 1] x [0, 0.5], its 12 triangles facing outwards.
@@ -188,3 +197,110 @@ def test_a_sweeping_wall_pushes_a_hanging_chain_and_never_passes_it(contact: boo
     else:
         assert inside_any > 100
         assert abs(x[0, -1, 0]) < 0.01  # the wall went through: the chain still hangs
+
+
+def wall_work(particles: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Scratch of :func:`project_on_walls` for a chain of ``particles``."""
+    rows = 2 * particles - 1
+    return np.empty((particles - 1, 3)), np.empty((rows, 3)), np.empty(rows), np.empty(particles)
+
+
+def test_the_projection_on_walls_without_a_wall_is_the_length_projection() -> None:
+    """No particle pinned: :func:`project_on_walls` solves the same Newton steps as
+    :func:`project_lengths` (Eq. T8), by a band solve instead of the Thomas algorithm."""
+    rng = np.random.default_rng(3)
+    particles, spacing = 15, 0.02
+    steps = rng.normal(size=(particles - 1, 3))
+    steps *= spacing / np.linalg.norm(steps, axis=1, keepdims=True)
+    x = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+    x[1:] += rng.normal(scale=0.1 * spacing, size=(particles - 1, 3))  # lengths off by ~10 %
+    inverse_mass = np.ones(particles)
+    inverse_mass[0] = 0.0
+    a, b = x.copy(), x.copy()
+    done_a = project_lengths(
+        a,
+        inverse_mass,
+        spacing,
+        1e-12,
+        50,
+        np.empty((particles - 1, 3)),
+        np.empty((4, particles - 1)),
+    )
+    pinned = np.zeros(particles, bool)
+    done_b = project_on_walls(
+        b, inverse_mass, spacing, 1e-12, 50, pinned, np.zeros_like(x), np.zeros_like(x),
+        *wall_work(particles),
+    )  # fmt: skip
+    assert done_a == done_b > 2
+    np.testing.assert_allclose(b, a, rtol=0, atol=1e-14)
+
+
+def test_a_particle_on_a_wall_slides_along_its_tangent_plane() -> None:
+    """A chain bent over a wall z = 0 with particles 3..6 put on it (pushed up from inside, their
+    segments stretched): projected together with their planes (Eq. T17), they stay on the wall
+    and slide along it, the lengths exact; the other particles take up the rest."""
+    particles, spacing = 10, 0.02
+    angle = np.radians(20.0)
+    x = np.arange(particles)[:, None] * spacing * np.array([np.cos(angle), 0.0, -np.sin(angle)])
+    x[:, 2] += 2.5 * spacing * np.sin(angle)  # particles 3.. start below z = 0
+    below = x[:, 2] < 0.0
+    assert below[3:].all() and not below[:3].any()
+    x[below, 2] = 0.0  # pushed straight up onto the wall
+    pinned = below.copy()
+    normals = np.zeros_like(x)
+    normals[:, 2] = 1.0
+    surface = x.copy()
+    inverse_mass = np.ones(particles)
+    inverse_mass[0] = 0.0
+    edges, band, rhs, pushes = wall_work(particles)
+    done = project_on_walls(
+        x, inverse_mass, spacing, 1e-12, 50, pinned, surface, normals, edges, band, rhs, pushes
+    )
+    assert done > 0
+    np.testing.assert_allclose(np.linalg.norm(np.diff(x, axis=0), axis=1), spacing, rtol=1e-11)
+    np.testing.assert_allclose(x[below, 2], 0.0, atol=1e-13)
+    assert np.all(np.abs(x[below, 0] - surface[below, 0]) > 5e-5)  # they slid, not stood
+    # the wall held them out, not in: what it moved them into it is round-off
+    assert np.all(inverse_mass[below] * pushes[below] <= WALL_RELEASE_ABOVE * spacing)
+    assert inverse_mass[3] * pushes[3] < -1e-3 * spacing  # the first one is pressed on it
+
+
+def test_a_fringe_tentacle_pressed_under_the_margin_slides_along_it() -> None:
+    """One of `moon-jelly`'s fringe tentacles over the frame in which its margin re-opens over it
+    (t = 1.65-1.70 s; tests/data/README.md). Particles 3 and 4 are pushed into the wall above
+    the root in every substep. Held where they were pushed (the rounds before the planes of
+    Eq. T17), the projection pulled them back in: 2 particles inside after the frame, 2.2 mm
+    deep. Kept on the wall's tangent planes, the chain slides along the wall: none inside, the
+    lengths exact."""
+    data = np.load(Path(__file__).parents[1] / "data" / "moon_jelly_fringe_under_the_margin.npz")
+
+    def fields(prefix: str, names: tuple[str, ...]) -> dict[str, object]:
+        values = {name: data[f"{prefix}_{name}"] for name in names}
+        return {name: v.item() if v.ndim == 0 else v for name, v in values.items()}
+
+    model = ChainModel(**fields("model", ChainModel._fields))
+    medium = Medium(**fields("medium", Medium._fields))
+    faces = bell_faces(50)
+    obstacle = shell_obstacle(data["shell_start"], data["shell_end"], faces)
+    x = data["positions"][None].copy()
+    v = data["velocities"][None].copy()
+    diagnostics = np.zeros((1, 3))
+    advance_frame(
+        x, v, data["root_positions"][:, None], data["root_velocities"][:, None],
+        data["root_directions"][:, None], data["curl_normals"][:, None], np.zeros_like(x),
+        data["flow"][:, None], model, medium, float(data["dt"]), diagnostics,
+        np.zeros((1, 0, 3)), obstacle,
+    )  # fmt: skip
+    assert diagnostics[0, 2] == -1
+    assert diagnostics[0, 0] <= 1e-10
+    assert not inside_closed_surface(x[0, 1:], data["shell_end"], faces).any()
+    # and it is the wall that moved them: without the contact, particle 3 ends inside
+    y = data["positions"][None].copy()
+    w = data["velocities"][None].copy()
+    advance_frame(
+        y, w, data["root_positions"][:, None], data["root_velocities"][:, None],
+        data["root_directions"][:, None], data["curl_normals"][:, None], np.zeros_like(y),
+        data["flow"][:, None], model, medium, float(data["dt"]), diagnostics,
+        np.zeros((1, 0, 3)), no_obstacle(),
+    )  # fmt: skip
+    assert inside_closed_surface(y[0], data["shell_end"], faces)[3]

@@ -7,10 +7,11 @@ Here the bell's tissue is the closed shell every output draws (``bell/surface_ve
 each substep's projection a particle whose centre lies inside the shell (an odd number of the
 shell's triangles above it, Eq. T15) is put back on the shell's surface where its path came in,
 or at the surface's nearest point where the wall came over it (Eq. T16); the kernel then projects
-the chain's lengths again, in rounds (Eq. T17, :func:`jellysim.tentacle.kernels._keep_out`). The
-velocity from the displacement (Eq. T9) carries the wall's normal velocity: an inelastic,
-frictionless contact. The bell does not feel it, as it feels no other force of its tentacles (the
-paper's one-way coupling, §4.2.4).
+the chain's lengths again together with the wall's tangent plane at each particle put on it, so
+that the chain slides along the wall, in rounds (Eq. T17,
+:func:`jellysim.tentacle.kernels._keep_out`). The velocity from the displacement (Eq. T9) carries
+the wall's normal velocity: an inelastic, frictionless contact. The bell does not feel it, as it
+feels no other force of its tentacles (the paper's one-way coupling, §4.2.4).
 """
 
 from __future__ import annotations
@@ -183,10 +184,16 @@ def _inside_box(p: np.ndarray, obstacle: Obstacle) -> bool:
 
 @njit(cache=True)
 def _first_crossing(
-    a: np.ndarray, b: np.ndarray, obstacle: Obstacle, tau: float, corners: np.ndarray
+    a: np.ndarray,
+    b: np.ndarray,
+    obstacle: Obstacle,
+    tau: float,
+    corners: np.ndarray,
+    normal: np.ndarray,
 ) -> float:
     """The least t in [0, 1] at which the segment a + t (b - a) meets a triangle of the shell at
-    ``tau`` (Moller & Trumbore, J. Graphics Tools 2, 1997); 2 if it meets none."""
+    ``tau`` (Moller & Trumbore, J. Graphics Tools 2, 1997); 2 if it meets none. ``normal`` (3,)
+    receives that triangle's unit normal, turned towards ``a`` (the side the segment came from)."""
     best = 2.0
     dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
     for f in range(obstacle.faces.shape[0]):
@@ -214,6 +221,12 @@ def _first_crossing(
         t = (e2x * qx + e2y * qy + e2z * qz) * inverse
         if 0.0 <= t < best:
             best = t
+            # e1 x e2, turned against the segment's direction (it points back to a).
+            nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+            norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if nx * dx + ny * dy + nz * dz > 0.0:
+                norm = -norm
+            normal[0], normal[1], normal[2] = nx / norm, ny / norm, nz / norm
     return best
 
 
@@ -227,19 +240,25 @@ def push_out(
     pinned: np.ndarray,
     scratch: np.ndarray,
     gap: float = 0.0,
+    normals: np.ndarray | None = None,
 ) -> int:
     """Put every particle ``first``.. of chain ``x`` (P, 3) that lies inside the shell at ``tau``
     back on its surface, the obstacle's clearance plus ``gap`` (m) outside (Eq. T16): where it was
     outside at the
     step's start ``old`` (P, 3), at the point where its path from there first meets the surface;
     where the wall came over it, at the nearest point of the surface. Marks the particles moved in
-    ``pinned`` (P,) and returns their number. ``scratch`` (11, 3) is work space."""
+    ``pinned`` (P,) and returns their number; ``normals`` (P, 3), if given, receives each moved
+    particle's unit outward normal of the surface where it was put (the triangle's its path
+    crossed, or the direction from the particle to its nearest point), the wall's tangent plane
+    there being what :func:`jellysim.tentacle.kernels.project_on_walls` keeps it outside of.
+    ``scratch`` (11, 3) is work space."""
     if obstacle.faces.shape[0] == 0:
         return 0
     corners = scratch[0:3]
     work = scratch[3:8]
     nearest = scratch[8]
     best = scratch[9]
+    crossed = scratch[10]
     moved = 0
     for i in range(first, x.shape[0]):
         p = x[i]
@@ -248,7 +267,7 @@ def push_out(
         a = old[i]
         if not (_inside_box(a, obstacle) and inside_shell(a, obstacle, tau, corners)):
             # It moved in this step: stop it where its path meets the surface.
-            t = _first_crossing(a, p, obstacle, tau, corners)
+            t = _first_crossing(a, p, obstacle, tau, corners, crossed)
             length = math.sqrt((p[0] - a[0]) ** 2 + (p[1] - a[1]) ** 2 + (p[2] - a[2]) ** 2)
             if t <= 1.0 and length > 0.0:
                 back = max(t - (obstacle.clearance + gap) / length, 0.0)
@@ -256,6 +275,8 @@ def push_out(
                     best[k] = a[k] + back * (p[k] - a[k])
                 for k in range(3):
                     x[i, k] = best[k]
+                    if normals is not None:
+                        normals[i, k] = crossed[k]
                 pinned[i] = True
                 moved += 1
                 continue
@@ -272,6 +293,8 @@ def push_out(
         if distance > 0.0:
             scale = 1.0 + (obstacle.clearance + gap) / distance
             for k in range(3):
+                if normals is not None:  # before x[i] (p) changes
+                    normals[i, k] = (best[k] - p[k]) / distance
                 x[i, k] = p[k] + scale * (best[k] - p[k])
             pinned[i] = True
             moved += 1

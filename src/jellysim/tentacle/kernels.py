@@ -16,7 +16,8 @@ prescribed; particles 1..P-1 are free. The step, per chain and substep dt (Eq. T
    on a tridiagonal system, O(P) each; it only removes the linearisation's second-order error
    (Eq. T8),
 4. where the chain has an obstacle (the bell's shell, ``bell.tentacle_contact``): the particles
-   inside it put back on its surface and the lengths projected again, in rounds (Eq. T15-T17),
+   inside it put back on its surface and the lengths projected again together with the wall's
+   tangent plane at each of them, in rounds (Eq. T15-T17),
 5. ``v = (x_new - x_old) / dt`` (Eq. T9).
 
 Solving bending and the constraints together keeps the scheme consistent at any dt: at rest its
@@ -522,6 +523,139 @@ def project_lengths(
     return -1
 
 
+@njit(cache=True, error_model="numpy")
+def project_on_walls(
+    x: np.ndarray,
+    inverse_mass: np.ndarray,
+    spacing: float,
+    tolerance: float,
+    max_iterations: int,
+    pinned: np.ndarray,
+    surface: np.ndarray,
+    normals: np.ndarray,
+    edges: np.ndarray,
+    band: np.ndarray,
+    rhs: np.ndarray,
+    pushes: np.ndarray,
+) -> int:
+    """Project chain ``x`` (P, 3) onto its lengths ``|x_{i+1} - x_i| = d`` and, for every
+    ``pinned`` particle i, onto the wall's tangent plane where it was put, ``n_i . (x_i - s_i) =
+    0`` (``surface`` s_i and unit outward ``normals`` n_i, (P, 3)), together, Eq. (T17): a chain
+    pressed on a wall slides along it. Newton iterations of the fast projection on both kinds of
+    constraint: ``(J W J^T) lambda = C(x)``, ``x -= W J^T lambda``, W the inverse masses. Ordered
+    plane of particle 0, segment 0, plane of particle 1, segment 1, ..., J W J^T has half-bandwidth
+    2 (rows of particles not pinned are decoupled identities), solved by LDL^T in O(P).
+
+    ``pushes`` (P,) receives each plane's summed multiplier: a plane holds its particle in, not
+    out, where that is positive (its correction ``-w_i lambda_i n_i`` points into the wall).
+    ``edges`` (P - 1, 3), ``band`` (2P - 1, 3) and ``rhs`` (2P - 1,) are scratch. Returns the
+    iterations used, or -1 if a length or a plane is still off by more than ``tolerance``
+    (relative to d) after ``max_iterations`` or the system is singular (a plane along both of its
+    particle's segments)."""
+    n_particles = x.shape[0]
+    segments = n_particles - 1
+    rows = 2 * segments + 1
+    d2 = spacing * spacing
+    pushes[:] = 0.0
+    for iteration in range(max_iterations + 1):
+        worst = 0.0
+        for j in range(segments):
+            s = 0.0
+            for k in range(3):
+                e = x[j + 1, k] - x[j, k]
+                edges[j, k] = e
+                s += e * e
+            rhs[2 * j + 1] = s - d2
+            worst = max(worst, abs(math.sqrt(s) / spacing - 1.0))
+        for i in range(n_particles):
+            if pinned[i]:
+                g = 0.0
+                for k in range(3):
+                    g += normals[i, k] * (x[i, k] - surface[i, k])
+                rhs[2 * i] = g
+                worst = max(worst, abs(g) / spacing)
+            else:
+                rhs[2 * i] = 0.0
+        if not worst <= tolerance:  # also catches NaN
+            if iteration == max_iterations or not math.isfinite(worst):
+                return -1
+        else:
+            return iteration
+        # J W J^T in the lower band: band[r, s] = M[r, r - s].
+        for r in range(rows):
+            band[r, 0] = 0.0
+            band[r, 1] = 0.0
+            band[r, 2] = 0.0
+        for i in range(n_particles):
+            w = inverse_mass[i]
+            if pinned[i]:
+                band[2 * i, 0] = w
+                if i >= 1:  # the segment before it: its gradient on x_i is 2 e_{i-1}
+                    dot = 0.0
+                    for k in range(3):
+                        dot += edges[i - 1, k] * normals[i, k]
+                    band[2 * i, 1] = 2.0 * w * dot
+                if i < segments:  # the segment after it: -2 e_i
+                    dot = 0.0
+                    for k in range(3):
+                        dot += edges[i, k] * normals[i, k]
+                    band[2 * i + 1, 1] = -2.0 * w * dot
+            else:
+                band[2 * i, 0] = 1.0
+        for j in range(segments):
+            ee = 0.0
+            dot = 0.0
+            for k in range(3):
+                ee += edges[j, k] * edges[j, k]
+                if j + 1 < segments:
+                    dot += edges[j, k] * edges[j + 1, k]
+            band[2 * j + 1, 0] = 4.0 * ee * (inverse_mass[j] + inverse_mass[j + 1])
+            if j + 1 < segments:
+                band[2 * j + 3, 2] = -4.0 * inverse_mass[j + 1] * dot
+        # LDL^T of half-bandwidth 2, in place (L below the diagonal, D on it), then the solve.
+        for r in range(rows):
+            if r >= 2:
+                band[r, 2] /= band[r - 2, 0]
+            if r >= 1:
+                m1 = band[r, 1]
+                if r >= 2:
+                    m1 -= band[r, 2] * band[r - 2, 0] * band[r - 1, 1]
+                band[r, 1] = m1 / band[r - 1, 0]
+            pivot = band[r, 0]
+            if r >= 1:
+                pivot -= band[r, 1] * band[r, 1] * band[r - 1, 0]
+            if r >= 2:
+                pivot -= band[r, 2] * band[r, 2] * band[r - 2, 0]
+            if not pivot > 1e-14 * band[r, 0]:
+                return -1
+            band[r, 0] = pivot
+        for r in range(1, rows):
+            rhs[r] -= band[r, 1] * rhs[r - 1]
+            if r >= 2:
+                rhs[r] -= band[r, 2] * rhs[r - 2]
+        for r in range(rows):
+            rhs[r] /= band[r, 0]
+        for r in range(rows - 2, -1, -1):
+            rhs[r] -= band[r + 1, 1] * rhs[r + 1]
+            if r + 2 < rows:
+                rhs[r] -= band[r + 2, 2] * rhs[r + 2]
+        # x -= W J^T lambda: the segments' 2 e (at the iterate) and the planes' n.
+        for i in range(n_particles):
+            w = inverse_mass[i]
+            if w == 0.0:
+                continue
+            plane = rhs[2 * i] if pinned[i] else 0.0
+            pushes[i] += plane
+            for k in range(3):
+                g = plane * normals[i, k]
+                if i >= 1:
+                    g += 2.0 * edges[i - 1, k] * rhs[2 * i - 1]
+                if i < segments:
+                    g -= 2.0 * edges[i, k] * rhs[2 * i + 1]
+                x[i, k] -= w * g
+    return -1
+
+
 MAX_LINEARISATIONS = 8
 RELINEARISE_ABOVE = 1.0e-3  # relative length error after a solve that asks for another
 PROJECTION_TOLERANCE = 1.0e-10  # relative segment-length error after every step
@@ -676,12 +810,17 @@ def _assemble_constraint(
 
 
 CONTACT_ROUNDS = 32  # pushes out of the bell, each followed by a projection (Eq. T17)
-# A pushed particle's inverse mass in the projection after it, of its own: the first that lets the
-# projection converge (Eq. T17); 1 is the plain projection, which always does.
+# Where the projection on the walls' tangent planes does not converge: a pushed particle's inverse
+# mass in the plain projection after it, of its own, the first that lets it converge (Eq. T17); 1
+# is the plain projection, which always does.
 HELD_WEIGHTS = (1.0e-3, 1.0e-1, 1.0)
 # Of the spacing: how far beyond the surface the rounds push, so that the projection after the
-# last one, which moves a held particle a little, leaves it outside (Eq. T17).
+# last one, which may move a particle a little off its plane's point, leaves it outside (Eq. T17).
 CONTACT_GAP = 1.0e-3
+WALL_RELEASES = 4  # re-projections after letting go of walls that held a particle in (Eq. T17)
+# Of the spacing: a wall whose summed correction moved its particle further into it than this held
+# it in, and is let go (less is round-off).
+WALL_RELEASE_ABOVE = 1.0e-9
 
 
 @njit(cache=True, error_model="numpy")
@@ -700,31 +839,67 @@ def _keep_out(
     held: np.ndarray,
     saved: np.ndarray,
     scratch: np.ndarray,
+    walls: np.ndarray,
+    wall_band: np.ndarray,
+    wall_rhs: np.ndarray,
 ) -> int:
     """Push the chain ``x`` out of the bell's shell and restore its lengths, Eq. (T15-T17): up to
     ``CONTACT_ROUNDS`` times, put the particles inside back on the surface (:func:`push_out`),
-    then project the lengths again with every particle pushed so far held (its inverse mass
-    scaled by the first of ``HELD_WEIGHTS`` under which the projection converges), so that the
-    rest of the chain follows them: the rounds alternate between the two constraints, as
-    position-based dynamics does (Muller et al., J. Vis. Commun. Image R. 18, 2007). The lengths
-    are exact on return; a particle may be left inside where the two constraints cannot both be
-    met (a root under the wall that sweeps over its chain). Returns the most projection iterations
-    of the step, or -1 if a projection failed."""
+    then project the lengths again with every particle pushed so far kept on the wall's tangent
+    plane where it was put (:func:`project_on_walls`), so that the chain slides along the wall
+    instead of being pulled back into it; a plane that holds its particle in rather than out is let
+    go and the projection repeated (up to ``WALL_RELEASES`` times). Where that projection does not
+    converge, the pushed particles are held instead (their inverse masses scaled by the first of
+    ``HELD_WEIGHTS`` under which the plain projection converges). The rounds alternate between the
+    two constraints, as position-based dynamics does (Muller et al., J. Vis. Commun. Image R. 18,
+    2007). The lengths are exact on return; a particle may be left inside where the two
+    constraints cannot both be met (a root under the wall that sweeps over its chain). Returns the
+    most projection iterations of the step, or -1 if a projection failed. ``walls`` (4, P, 3):
+    the planes' points and normals, the pushed state and the planes' multipliers (scratch)."""
+    surface = walls[0]
+    normals = walls[1]
+    pushed = walls[2]
+    pushes = walls[3, :, 0]
     pinned[:] = False
     for _round in range(CONTACT_ROUNDS):
-        if push_out(x, old, first, obstacle, tau, pinned, scratch, CONTACT_GAP * spacing) == 0:
-            break
         saved[:] = x
+        if (
+            push_out(x, old, first, obstacle, tau, pinned, scratch, CONTACT_GAP * spacing, normals)
+            == 0
+        ):
+            break
+        for i in range(first, x.shape[0]):
+            if x[i, 0] != saved[i, 0] or x[i, 1] != saved[i, 1] or x[i, 2] != saved[i, 2]:
+                for k in range(3):
+                    surface[i, k] = x[i, k]  # this round's plane goes through where it was put
+        pushed[:] = x
         done = -1
-        for weight in HELD_WEIGHTS:
-            for i in range(x.shape[0]):
-                held[i] = weight * inverse_mass[i] if pinned[i] else inverse_mass[i]
-            done = project_lengths(
-                x, held, spacing, PROJECTION_TOLERANCE, PROJECTION_MAX_ITERATIONS, edges, work
-            )
-            if done >= 0:
+        for release in range(WALL_RELEASES + 1):
+            done = project_on_walls(
+                x, inverse_mass, spacing, PROJECTION_TOLERANCE, PROJECTION_MAX_ITERATIONS,
+                pinned, surface, normals, edges, wall_band, wall_rhs, pushes,
+            )  # fmt: skip
+            if done < 0 or release == WALL_RELEASES:
                 break
-            x[:] = saved  # too stiff a projection to converge: hold the pushed ones less
+            let_go = False
+            for i in range(first, x.shape[0]):
+                if pinned[i] and inverse_mass[i] * pushes[i] > WALL_RELEASE_ABOVE * spacing:
+                    pinned[i] = False
+                    let_go = True
+            if not let_go:
+                break
+            x[:] = pushed
+        if done < 0:
+            x[:] = pushed
+            for weight in HELD_WEIGHTS:
+                for i in range(x.shape[0]):
+                    held[i] = weight * inverse_mass[i] if pinned[i] else inverse_mass[i]
+                done = project_lengths(
+                    x, held, spacing, PROJECTION_TOLERANCE, PROJECTION_MAX_ITERATIONS, edges, work
+                )
+                if done >= 0:
+                    break
+                x[:] = pushed  # too stiff a projection to converge: hold the pushed ones less
         if done < 0:
             return -1
         iterations = max(iterations, done)
@@ -811,6 +986,9 @@ def advance_frame(
         held = np.empty(n_contact)
         saved = np.empty((n_contact, 3))
         contact_scratch = np.empty((11, 3))
+        walls = np.zeros((4, n_contact, 3))
+        wall_band = np.empty((max(2 * n_contact - 1, 0), 3))
+        wall_rhs = np.empty(max(2 * n_contact - 1, 0))
         worst_error = 0.0
         most_iterations = 0
         failed_at = -1
@@ -928,7 +1106,8 @@ def advance_frame(
                 # Out of the bell's tissue, Eq. (T15-T17): the velocity below carries the wall's.
                 iterations = _keep_out(
                     x, old, first, obstacle, (s + 1.0) / n_substeps, model.inverse_mass, d,
-                    iterations, edges, work, pinned, held, saved, contact_scratch,
+                    iterations, edges, work, pinned, held, saved, contact_scratch, walls,
+                    wall_band, wall_rhs,
                 )  # fmt: skip
             # Velocities from the displacement, Eq. (T9).
             if first == 1:
