@@ -38,7 +38,7 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
             "fluid.gradient": "corrected",
         },
     ),
-    "dam-break-2d-deflated": ("dam-break-2d", {**_DAM_COARSE, "fluid.solver": "deflated"}),
+    "dam-break-2d-iccg": ("dam-break-2d", {**_DAM_COARSE, "fluid.solver": "iccg"}),
     "hydrostatic-2d": ("hydrostatic-2d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
     "hydrostatic-3d": ("hydrostatic-3d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
     "tank-3d": ("tank-3d", {"fluid.spacing": 0.025, "duration": 0.04, "fps": 50.0}),

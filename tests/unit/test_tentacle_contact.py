@@ -20,9 +20,11 @@ from jellysim.tentacle.contact import (
     shell_obstacle,
 )
 from jellysim.tentacle.kernels import (
+    CONTACT_GAP,
     WALL_RELEASE_ABOVE,
     ChainModel,
     Medium,
+    _keep_out,
     advance_frame,
     project_lengths,
     project_on_walls,
@@ -236,7 +238,7 @@ def test_the_projection_on_walls_without_a_wall_is_the_length_projection() -> No
 
 
 def test_a_particle_on_a_wall_slides_along_its_tangent_plane() -> None:
-    """A chain bent over a wall z = 0 with particles 3..6 put on it (pushed up from inside, their
+    """A chain bent over a wall z = 0 with particles 3..9 put on it (pushed up from inside, their
     segments stretched): projected together with their planes (Eq. T17), they stay on the wall
     and slide along it, the lengths exact; the other particles take up the rest."""
     particles, spacing = 10, 0.02
@@ -304,3 +306,81 @@ def test_a_fringe_tentacle_pressed_under_the_margin_slides_along_it() -> None:
         np.zeros((1, 0, 3)), no_obstacle(),
     )  # fmt: skip
     assert inside_closed_surface(y[0], data["shell_end"], faces)[3]
+
+
+def test_a_projection_step_on_walls_is_the_dense_newton_step() -> None:
+    """One Newton step of :func:`project_on_walls` (Eq. T17) against a dense solve of the same
+    step, ``(J W J^T) lambda = C``, ``x -= W J^T lambda``, on random chains with random planes
+    (pinned particles, normals and points) and masses: the band's entries, its LDL^T and the
+    update agree to round-off, and ``pushes`` holds the planes' multipliers."""
+    rng = np.random.default_rng(11)
+    for trial in range(40):
+        particles = int(rng.integers(2, 9))
+        spacing = 0.05
+        x = np.cumsum(rng.normal(scale=spacing, size=(particles, 3)), axis=0)
+        inverse_mass = rng.uniform(0.5, 2.0, particles)
+        if trial % 2:
+            inverse_mass[0] = 0.0  # a prescribed root
+        pinned = (rng.random(particles) < 0.5) & (inverse_mass > 0)
+        normals = rng.normal(size=(particles, 3))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        surface = x + rng.normal(scale=0.2 * spacing, size=(particles, 3))
+        # The dense step: rows of J for the segments, then the pinned particles' planes.
+        rows, residual = [], []
+        for j in range(particles - 1):
+            e = x[j + 1] - x[j]
+            row = np.zeros((particles, 3))
+            row[j + 1], row[j] = 2 * e, -2 * e
+            rows.append(row.ravel())
+            residual.append(e @ e - spacing**2)
+        planes = np.flatnonzero(pinned)
+        for i in planes:
+            row = np.zeros((particles, 3))
+            row[i] = normals[i]
+            rows.append(row.ravel())
+            residual.append(normals[i] @ (x[i] - surface[i]))
+        jacobian = np.array(rows)
+        weights = np.repeat(inverse_mass, 3)
+        multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, np.array(residual))
+        expected = x - (weights * (jacobian.T @ multipliers)).reshape(particles, 3)
+        actual = x.copy()
+        edges, band, rhs, pushes = wall_work(particles)
+        project_on_walls(
+            actual, inverse_mass, spacing, 1e-300, 1, pinned, surface, normals, edges, band, rhs,
+            pushes,
+        )  # fmt: skip
+        np.testing.assert_allclose(actual, expected, rtol=0, atol=1e-12 * spacing)
+        np.testing.assert_allclose(
+            pushes[planes], multipliers[particles - 1 :], rtol=1e-9, atol=1e-12
+        )
+
+
+def test_a_wall_that_would_hold_a_particle_in_lets_it_go() -> None:
+    """Particle 1 of a chain of one segment (d = 0.08 m) hangs from a root 0.05 m above the box's
+    top face and 0.1 m aside; the wall came over it (0.05 m inside). Put on the top face it is
+    0.112 m from the root, too far: kept on the face, the length would pull it along the face and
+    the face would hold it down, into the wall (its multiplier positive). The contact only pushes
+    (Eq. T17), so that plane is let go: the particle rises off the wall, straight towards the
+    root, to its length, and ends outside the box."""
+    spacing = 0.08
+    root = np.array([0.6, 0.5, 0.55])
+    x = np.array([root, [0.5, 0.5, 0.45]])
+    old = x.copy()
+    obstacle = shell_obstacle(BOX_VERTICES, BOX_VERTICES, BOX_FACES)
+    inverse_mass = np.array([0.0, 1.0])
+    particles = 2
+    rows = 2 * particles - 1
+    iterations = _keep_out(
+        x, old, 1, obstacle, 1.0, inverse_mass, spacing, 0, np.empty((1, 3)), np.empty((4, 1)),
+        np.zeros(particles, bool), np.empty(particles), np.empty((particles, 3)),
+        np.empty((11, 3)), np.zeros((4, particles, 3)), np.empty((rows, 3)), np.empty(rows),
+    )  # fmt: skip
+    assert iterations >= 0
+    assert np.linalg.norm(x[1] - root) == pytest.approx(spacing, rel=1e-10)
+    pushed = np.array([0.5, 0.5, 0.5 + obstacle.clearance + CONTACT_GAP * spacing])  # the push
+    toward_root = (root - pushed) / np.linalg.norm(root - pushed)
+    np.testing.assert_allclose(
+        (x[1] - pushed) / np.linalg.norm(x[1] - pushed), toward_root, atol=1e-9
+    )
+    assert x[1, 2] > 0.5 + 0.01  # off the wall, not slid along it at z = 0.5
+    assert not inside_closed_surface(x[1:], BOX_VERTICES, BOX_FACES).any()

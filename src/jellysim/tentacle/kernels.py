@@ -550,8 +550,9 @@ def project_on_walls(
     out, where that is positive (its correction ``-w_i lambda_i n_i`` points into the wall).
     ``edges`` (P - 1, 3), ``band`` (2P - 1, 3) and ``rhs`` (2P - 1,) are scratch. Returns the
     iterations used, or -1 if a length or a plane is still off by more than ``tolerance``
-    (relative to d) after ``max_iterations`` or the system is singular (a plane along both of its
-    particle's segments)."""
+    (relative to d) after ``max_iterations`` or the system is singular (a segment along its
+    particle's plane normal whose other end cannot move that way: the root, or where no point of
+    the plane is at the segment's length from it)."""
     n_particles = x.shape[0]
     segments = n_particles - 1
     rows = 2 * segments + 1
