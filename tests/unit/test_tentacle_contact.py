@@ -372,7 +372,7 @@ def test_a_wall_that_would_hold_a_particle_in_lets_it_go() -> None:
     rows = 2 * particles - 1
     iterations = _keep_out(
         x, old, 1, obstacle, 1.0, inverse_mass, spacing, 0, np.empty((1, 3)), np.empty((4, 1)),
-        np.zeros(particles, bool), np.empty(particles), np.empty((particles, 3)),
+        np.zeros(particles, bool), np.empty(particles), np.zeros(particles, bool),
         np.empty((11, 3)), np.zeros((4, particles, 3)), np.empty((rows, 3)), np.empty(rows),
     )  # fmt: skip
     assert iterations >= 0

@@ -838,7 +838,7 @@ def _keep_out(
     work: np.ndarray,
     pinned: np.ndarray,
     held: np.ndarray,
-    saved: np.ndarray,
+    moved: np.ndarray,
     scratch: np.ndarray,
     walls: np.ndarray,
     wall_band: np.ndarray,
@@ -855,24 +855,25 @@ def _keep_out(
     two constraints, as position-based dynamics does (Muller et al., J. Vis. Commun. Image R. 18,
     2007). The lengths are exact on return; a particle may be left inside where the two
     constraints cannot both be met (a root under the wall that sweeps over its chain). Returns the
-    most projection iterations of the step, or -1 if a projection failed. ``walls`` (4, P, 3):
-    the planes' points and normals, the pushed state and the planes' multipliers (scratch)."""
+    most projection iterations of the step, or -1 if a projection failed. ``pinned``, ``moved``
+    (P,) bool, ``held`` (P,), ``walls`` (4, P, 3) are scratch: the particles with a plane, those
+    pushed in the round, the fallback's inverse masses, and the planes' points and normals, the
+    pushed state and the planes' multipliers."""
     surface = walls[0]
     normals = walls[1]
     pushed = walls[2]
     pushes = walls[3, :, 0]
     pinned[:] = False
     for _round in range(CONTACT_ROUNDS):
-        saved[:] = x
-        if (
-            push_out(x, old, first, obstacle, tau, pinned, scratch, CONTACT_GAP * spacing, normals)
-            == 0
-        ):
+        moved[:] = False  # this round's pushes
+        if push_out(x, old, first, obstacle, tau, moved, scratch, CONTACT_GAP * spacing, normals):
+            for i in range(first, x.shape[0]):
+                if moved[i]:
+                    pinned[i] = True
+                    for k in range(3):
+                        surface[i, k] = x[i, k]  # its plane goes through where it was put
+        else:
             break
-        for i in range(first, x.shape[0]):
-            if x[i, 0] != saved[i, 0] or x[i, 1] != saved[i, 1] or x[i, 2] != saved[i, 2]:
-                for k in range(3):
-                    surface[i, k] = x[i, k]  # this round's plane goes through where it was put
         pushed[:] = x
         done = -1
         for release in range(WALL_RELEASES + 1):
@@ -985,7 +986,7 @@ def advance_frame(
         n_contact = n_particles if contact else 0
         pinned = np.zeros(n_contact, dtype=np.bool_)
         held = np.empty(n_contact)
-        saved = np.empty((n_contact, 3))
+        moved = np.zeros(n_contact, dtype=np.bool_)
         contact_scratch = np.empty((11, 3))
         walls = np.zeros((4, n_contact, 3))
         wall_band = np.empty((max(2 * n_contact - 1, 0), 3))
@@ -1107,7 +1108,7 @@ def advance_frame(
                 # Out of the bell's tissue, Eq. (T15-T17): the velocity below carries the wall's.
                 iterations = _keep_out(
                     x, old, first, obstacle, (s + 1.0) / n_substeps, model.inverse_mass, d,
-                    iterations, edges, work, pinned, held, saved, contact_scratch, walls,
+                    iterations, edges, work, pinned, held, moved, contact_scratch, walls,
                     wall_band, wall_rhs,
                 )  # fmt: skip
             # Velocities from the displacement, Eq. (T9).
