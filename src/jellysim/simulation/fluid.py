@@ -14,6 +14,7 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.config import Scene
+from jellysim.errors import InputError
 from jellysim.fields import Dataset
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
@@ -71,18 +72,31 @@ class FluidSimulation(Simulation):
     def __init__(self, scene: Scene) -> None:
         super().__init__(scene)
         positions, kinds, self.geometry = fluid_particles(scene)
-        self.solver = MPSSolver(mps_parameters(scene), positions, kinds)
+        self.solver: Any
+        if scene.fluid.device == "cuda":
+            from jellysim.fluid import gpu
+
+            reason = gpu.unavailable()
+            if reason is not None:
+                raise InputError(reason)
+            self.solver = gpu.GPUSolver(mps_parameters(scene), positions, kinds)
+        else:
+            self.solver = MPSSolver(mps_parameters(scene), positions, kinds)
         self.stats = FrameStats()
 
     def describe(self) -> str:
         fluid = int(np.sum(self.solver.kind == FLUID))
+        gpu = self.scene.fluid.device == "cuda"
+        where = ", on the GPU (Jacobi-preconditioned CG)" if gpu else ""
         return (
             f"MPS {self.scene.fluid.dimensions}-D, {fluid} fluid and "
             f"{len(self.solver.kind) - fluid} wall particles, l0 = {self.solver.params.l0:g} m"
+            f"{where}"
         )
 
     def prepare(self) -> None:
-        compile_on_copy(self.solver)
+        if self.scene.fluid.device == "cpu":  # the GPU's kernels compile in the first step
+            compile_on_copy(self.solver)
 
     def step_frame(self) -> None:
         """Advance the fluid to the next frame time; raise SimulationUnstable if it diverged."""
