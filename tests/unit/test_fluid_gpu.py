@@ -170,12 +170,36 @@ def test_no_gpu_is_an_input_error(tmp_path) -> None:
     assert not out.exists()
 
 
-def test_soft_bell_on_the_gpu_is_an_input_error() -> None:
-    from jellysim import load_scene
-    from jellysim.errors import InputError
+def test_the_soft_bell_drives_water_on_the_gpu() -> None:
+    """The soft bell's springs stay on the CPU and read the bell's rows from the GPU solver:
+    from one state, the force density each step gives the water is the CPU run's, and the
+    frame's record of the bell is the same (the coupling's glue; a whole pulse on a GPU is
+    tests/gpu's)."""
+    import scenes
 
-    with pytest.raises(InputError, match="fluid-only scenes"):
-        load_scene("moon-jelly", {"fluid.device": "cuda"})
+    from jellysim import load_scene
+    from jellysim.coupling.bell_in_fluid import BellInFluid
+
+    overrides = {**scenes.SWIM, "duration": 0.2}
+    cpu = BellInFluid(load_scene("moon-jelly", overrides))
+    on_gpu = BellInFluid(load_scene("moon-jelly", {**overrides, "fluid.device": "cuda"}))
+    assert isinstance(on_gpu.solver, gpu.GPUSolver) and on_gpu.on_gpu
+    state = cpu.solver.state_arrays()
+    rng = np.random.default_rng(7)
+    state["velocity"][cpu.bell_rows] = rng.normal(
+        0.0, 0.05, (cpu.bell_rows.stop - cpu.bell_rows.start, 3)
+    )
+    cpu.solver.restore(state)
+    on_gpu.solver.restore(state)
+    expected = cpu._spring_force_density(0.3, 1e-3).copy()
+    got = on_gpu._spring_force_density(0.3, 1e-3)
+    assert np.abs(expected[cpu.bell_rows]).max() > 0.0
+    np.testing.assert_array_equal(got, expected)
+    cpu.record(0)
+    on_gpu.record(0)
+    np.testing.assert_array_equal(on_gpu.position, cpu.position)
+    np.testing.assert_array_equal(on_gpu.velocity, cpu.velocity)
+    assert on_gpu.solver.constants == cpu.solver.constants
 
 
 def test_a_run_resumes_on_the_other_device() -> None:

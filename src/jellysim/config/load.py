@@ -450,11 +450,6 @@ def _check_fluid(scene: Scene) -> None:
             "the number density at the start of the step, which only the mixed source "
             "computes); with another source set fluid.surface = 'standard'"
         )
-    if f.device == "cuda" and scene.bell.model == "mass-spring":
-        raise InputError(
-            "fluid.device = 'cuda' takes fluid-only scenes: the soft bell's springs and muscle "
-            "(bell.model = 'mass-spring') are stepped on the CPU; set fluid.device = 'cpu'"
-        )
     if f.lattice == "hexagonal" and f.dimensions != 2:
         raise InputError(
             "fluid.lattice = 'hexagonal' is 2-D only: set fluid.dimensions = 2, or "

@@ -605,8 +605,8 @@ class Fluid:
         kind="choice",
         choices=("cpu", "cuda"),
         doc="where the fluid is stepped: 'cpu' (the CPU cores), or 'cuda' (an NVIDIA GPU, "
-        "`pip install jellysim[cuda]`; fluid-only scenes; the pressure by Jacobi-"
-        "preconditioned CG whatever fluid.solver says; docs/fluid.md)",
+        "`pip install jellysim[cuda]`; the pressure by Jacobi-preconditioned CG whatever "
+        "fluid.solver says; a soft bell's springs stay on the CPU; docs/fluid.md)",
     )
     coarse_cell: float = param(
         4.0,

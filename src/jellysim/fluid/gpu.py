@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from jellysim.fluid.geometry import DUMMY, FLUID, WALL
-from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT
+from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT, Constants
 from jellysim.fluid.mps import (
     MPSParameters,
     PhaseTimer,
@@ -814,6 +814,18 @@ class GPUSolver:
             "gradient": lattice_reference(dim, l0, p.re_gradient, p.lattice),
             "laplacian": lattice_reference(dim, l0, p.laplacian_radius, p.lattice),
         }
+        self.constants = Constants(
+            dim=dim,
+            re_number_density=p.re_number_density * l0,
+            re_gradient=p.re_gradient * l0,
+            re_laplacian=p.laplacian_radius * l0,
+            n0=self.reference["number_density"].n0,
+            n0_gradient=self.reference["gradient"].n0,
+            n0_laplacian=self.reference["laplacian"].n0,
+            lambda_laplacian=self.reference["laplacian"].lambda_,
+            density=p.density,
+            kinematic_viscosity=p.kinematic_viscosity,
+        )
         self.search_radius = p.neighbour_radius * l0
         n = positions.shape[0]
         self.n = n
@@ -1168,13 +1180,21 @@ def cooperative_blocks(kernel: Any, args: tuple[Any, ...], wanted: int) -> int:
     return max(1, min(wanted, most))
 
 
-def make_solver(params: MPSParameters, positions: np.ndarray, kinds: np.ndarray, device: str):
-    """The solver for ``device`` ("cpu" or "cuda")."""
-    if device == "cuda":
-        return GPUSolver(params, positions, kinds)
-    from jellysim.fluid.mps import MPSSolver
+def make_solver(
+    params: MPSParameters, positions: np.ndarray, kinds: np.ndarray, device: str
+) -> Any:
+    """The solver for ``device`` ("cpu": :class:`~jellysim.fluid.mps.MPSSolver`; "cuda":
+    :class:`GPUSolver`, or InputError saying what to install where no GPU can run it)."""
+    if device != "cuda":
+        from jellysim.fluid.mps import MPSSolver
 
-    return MPSSolver(params, positions, kinds)
+        return MPSSolver(params, positions, kinds)
+    reason = unavailable()
+    if reason is not None:
+        from jellysim.errors import InputError
+
+        raise InputError(reason)
+    return GPUSolver(params, positions, kinds)
 
 
 __all__ = ["BLOCK", "GPUSolver", "make_solver", "simulated", "unavailable"]

@@ -14,10 +14,10 @@ import numpy as np
 
 from jellysim import fields
 from jellysim.config import Scene
-from jellysim.errors import InputError
 from jellysim.fields import Dataset
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
+from jellysim.fluid.gpu import make_solver
 from jellysim.fluid.mps import MPSSolver
 from jellysim.fluid.setup import fluid_particles, mps_parameters
 from jellysim.simulation.loop import Simulation, register_loop
@@ -72,16 +72,7 @@ class FluidSimulation(Simulation):
     def __init__(self, scene: Scene) -> None:
         super().__init__(scene)
         positions, kinds, self.geometry = fluid_particles(scene)
-        self.solver: Any
-        if scene.fluid.device == "cuda":
-            from jellysim.fluid import gpu
-
-            reason = gpu.unavailable()
-            if reason is not None:
-                raise InputError(reason)
-            self.solver = gpu.GPUSolver(mps_parameters(scene), positions, kinds)
-        else:
-            self.solver = MPSSolver(mps_parameters(scene), positions, kinds)
+        self.solver: Any = make_solver(mps_parameters(scene), positions, kinds, scene.fluid.device)
         self.stats = FrameStats()
 
     def describe(self) -> str:
