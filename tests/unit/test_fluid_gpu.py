@@ -69,6 +69,59 @@ def _pair(case: str) -> tuple[MPSSolver, gpu.GPUSolver, np.ndarray, int]:
     return cpu, gpu.GPUSolver(params, positions, kinds), kinds, steps
 
 
+def _stirred(cpu: MPSSolver) -> dict[str, np.ndarray]:
+    """``cpu``'s state with the water stirred (viscosity at work from the first step) and the
+    top particle of the column's middle thrown down at 3 m/s onto the one below it, thrown up:
+    they close to within the collision distance in a step, and the top one, pushed into the
+    water, has n* >= beta n0 though it started on the surface (n^k < beta n0)."""
+    state = cpu.state_arrays()
+    fluid = np.flatnonzero(cpu.kind == FLUID)
+    rng = np.random.default_rng(3)
+    state["velocity"][fluid] = rng.normal(0.0, 0.02, (fluid.size, cpu.params.dim))
+    x = state["position"][fluid]
+    middle = fluid[np.abs(x[:, 0] - np.median(x[:, 0])) < 0.3 * L0]
+    top = middle[np.argmax(state["position"][middle, -1])]
+    below = middle[np.argsort(state["position"][middle, -1])[-2]]
+    state["velocity"][top, -1] = -3.0
+    state["velocity"][below, -1] = 3.0
+    return state
+
+
+def test_gpu_step_matches_cpu_with_collisions_and_viscosity() -> None:
+    """A stirred column (:func:`_stirred`) with hydrostatic-2d's model: the collision, the
+    viscous term and the either-density surface all act in the step (checked on the CPU: with
+    another restitution or the standard surface criterion its result is another), and the GPU
+    gives the CPU's step."""
+    import dataclasses
+
+    cpu, device, kinds, _ = _pair("mixed-2d")
+    state = _stirred(cpu)
+    cpu.restore(state)
+    device.restore(state)
+    dt = cpu.stable_dt()
+    assert device.stable_dt() == pytest.approx(dt, rel=1e-14)
+    cpu_stats = cpu.step(dt)
+    gpu_stats = device.step(dt)
+    fluid = kinds == FLUID
+    assert gpu_stats.surface == cpu_stats.surface
+    assert np.abs(device.position[fluid] - cpu.position[fluid]).max() <= 1e-8 * L0
+    assert np.abs(device.velocity[fluid] - cpu.velocity[fluid]).max() <= 1e-6 * 9.81 * dt
+    assert np.abs(device.pressure - cpu.pressure).max() <= 1e-6 * cpu.pressure.max()
+    for change, what in (
+        ({"collision_restitution": 1.0}, "velocity"),
+        ({"surface": "standard"}, "surface"),
+        ({"kinematic_viscosity": 0.0}, "velocity"),
+    ):
+        other = MPSSolver(dataclasses.replace(cpu.params, **change), state["position"], kinds)
+        other.restore(state)
+        stats = other.step(dt)
+        if what == "surface":
+            assert stats.surface != cpu_stats.surface, change
+        else:
+            apart = np.abs(other.velocity[fluid] - cpu.velocity[fluid]).max()
+            assert apart > 1e3 * 1e-6 * 9.81 * dt, change
+
+
 @pytest.mark.parametrize("case", list(CASES))
 def test_gpu_step_matches_cpu(case: str) -> None:
     cpu, device, kinds, steps = _pair(case)
@@ -93,15 +146,23 @@ def test_gpu_step_matches_cpu(case: str) -> None:
 
 
 def test_gpu_runs_are_the_same_to_the_bit_and_resume_across_devices() -> None:
-    """Two GPU runs of a step agree bit for bit (no floating-point atomics); a GPU state
-    resumes on the CPU and a CPU state on the GPU (the checkpoint's arrays are the same)."""
+    """Two GPU runs of a step agree bit for bit (no floating-point atomic sums); a GPU run
+    resumed from its checkpoint in a new solver steps as the run itself; a GPU state resumes
+    on the CPU and a CPU state on the GPU (the checkpoint's arrays are the same)."""
     cpu, first, kinds, _ = _pair("standard-2d")
-    second = gpu.GPUSolver(first.params, cpu.position, kinds)
+    positions = cpu.position.copy()
+    second = gpu.GPUSolver(first.params, positions, kinds)
     dt = cpu.stable_dt()
     first.step(dt)
     second.step(dt)
     for name, value in first.state_arrays().items():
         np.testing.assert_array_equal(second.state_arrays()[name], value, err_msg=name)
+    resumed = gpu.GPUSolver(first.params, positions, kinds)
+    resumed.restore(first.state_arrays())
+    first.step(dt)
+    resumed.step(dt)
+    for name, value in first.state_arrays().items():
+        np.testing.assert_array_equal(resumed.state_arrays()[name], value, err_msg=name)
     # GPU checkpoint, CPU resume; and back
     cpu.restore(first.state_arrays())
     for name, value in first.state_arrays().items():
@@ -110,6 +171,9 @@ def test_gpu_runs_are_the_same_to_the_bit_and_resume_across_devices() -> None:
     second.restore(cpu.state_arrays())
     for name, value in cpu.state_arrays().items():
         np.testing.assert_array_equal(second.state_arrays()[name], value, err_msg=name)
+    # the host copies are read-only: a write would not reach the GPU
+    with pytest.raises(ValueError, match="read-only"):
+        second.velocity[0, 0] = 1.0
 
 
 def test_neighbour_lists_match_the_cell_search_and_grow() -> None:
@@ -131,7 +195,11 @@ def test_neighbour_lists_match_the_cell_search_and_grow() -> None:
     start, cpu_index, cpu_distance = search_neighbours(
         positions, alive, rows, device.search_radius, np.empty(0, np.int32), np.empty(0)
     )
+    cell = device._cell.copy_to_host()
     for i in range(len(kinds)):
+        # in the order of the cells around i (increasing cell number), by index within a cell
+        order = [(cell[j], j) for j in index[: count[i], i]]
+        assert order == sorted(order), i
         row = slice(start[i], start[i + 1])
         expected = dict(zip(cpu_index[row], cpu_distance[row], strict=True))
         got = dict(zip(index[: count[i], i], distance[: count[i], i], strict=True))
@@ -149,6 +217,28 @@ def test_gpu_solver_fails_as_the_cpu_one_does() -> None:
     device = gpu.GPUSolver(params, positions, kinds)
     with pytest.raises(FluidDiverged, match="relative residual"):
         device.step(device.stable_dt())
+
+
+def test_the_solve_reports_a_non_finite_source_and_skips_a_zero_one() -> None:
+    """A NaN in b is a FluidDiverged (a non-finite residual, as the CPU's CG gives); b = 0
+    with a non-zero warm start is solved by x = 0 in no iteration (the CPU's answer)."""
+    from jellysim.fluid.solvers import FluidDiverged
+
+    positions, kinds = _particles(2, "square")
+    device = gpu.GPUSolver(
+        MPSParameters(dim=2, l0=L0, source="mixed", gradient="corrected"), positions, kinds
+    )
+    device.step(device.stable_dt())  # rows, source and a warm start in place
+    k = device.k
+    k["fill"][gpu._grid(device.n), gpu.BLOCK](device._b, np.nan)
+    with pytest.raises(FluidDiverged):
+        device._solve()
+    k["fill"][gpu._grid(device.n), gpu.BLOCK](device._b, 0.0)
+    k["fill"][gpu._grid(device.n), gpu.BLOCK](device._x, 5.0)
+    assert device._solve() == (0, 0.0)
+    assert not device._x.copy_to_host().any()
+    with pytest.raises(ValueError, match="external_force"):
+        device.step(1e-4, np.zeros((1, 2)))
 
 
 def test_no_gpu_is_an_input_error(tmp_path) -> None:
@@ -173,8 +263,8 @@ def test_no_gpu_is_an_input_error(tmp_path) -> None:
 def test_the_soft_bell_drives_water_on_the_gpu() -> None:
     """The soft bell's springs stay on the CPU and read the bell's rows from the GPU solver:
     from one state, the force density each step gives the water is the CPU run's, and the
-    frame's record of the bell is the same (the coupling's glue; a whole pulse on a GPU is
-    tests/gpu's)."""
+    frame's record of the bell is the same (the coupling's glue; the simulator is too slow for
+    a pulse of it: three pulses on a GPU are in docs/performance.md)."""
     import scenes
 
     from jellysim import load_scene

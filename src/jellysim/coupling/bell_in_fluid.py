@@ -25,9 +25,8 @@ from jellysim.coupling.water_at import spread_reaction
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.gpu import make_solver
 from jellysim.fluid.mps import MPSParameters
-from jellysim.fluid.setup import fluid_particles, mps_parameters
+from jellysim.fluid.setup import fluid_particles, make_solver, mps_parameters
 from jellysim.tentacle.layout import root_layout
 
 # kappa of the fluid's acceleration limit under gravity, dt <= kappa sqrt(l0 / g): gravity moves a

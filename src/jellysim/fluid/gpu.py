@@ -10,10 +10,12 @@ when a particle has more neighbours), in the order of the cells around it and of
 index within a cell, so that each particle sums its neighbours in one fixed order.
 
 Reproducible: no floating-point atomic sums. A dot product sums within each block of
-:data:`BLOCK` threads by a fixed tree, and the last block to finish sums the blocks' partial
-sums in block order; the maxima of :meth:`GPUSolver.stable_dt` are order-free. Two runs on one
-GPU give the same bits; the CPU path sums in another order and uses another solver, so the two
-agree to the solver's tolerance, not bit for bit.
+:data:`BLOCK` threads by a fixed tree; after a grid barrier every block sums the blocks' sums
+in one fixed order (each thread a strided share, then the tree). The atomics left are order-free:
+integer counts, and the maxima of :meth:`GPUSolver.stable_dt`. Two runs on one GPU give the same
+bits; another card (the solve's grid is as many blocks as it holds at once) or the simulator
+(one block) gives other round-off, and the CPU path sums in another order with another solver:
+the paths agree to the solver's tolerance, not bit for bit.
 
 Without a GPU, Numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, set before Numba is
 imported) runs the same kernels in Python threads: the unit tests run them so on tiny scenes
@@ -22,6 +24,7 @@ imported) runs the same kernels in Python threads: the unit tests run them so on
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from typing import Any
@@ -38,6 +41,8 @@ from jellysim.fluid.mps import (
     step_limits,
 )
 from jellysim.fluid.solvers import FluidDiverged
+
+log = logging.getLogger(__name__)
 
 # numba-cuda 0.30 registers an overload of np.row_stack when it compiles its first kernel, and
 # NumPy 2.5 removed that alias of np.vstack: without it no kernel compiles (docs/decisions.md).
@@ -57,14 +62,12 @@ def simulated() -> bool:
 
 
 # Threads of a block. The dot products' partial sums are per block, so the round-off of a
-# solve depends on it: fixed, the same on every GPU and in the simulator.
+# solve depends on it (and on the number of blocks).
 BLOCK = 128
 # The neighbour lists' width: this many times the neighbours of a particle on the perfect
 # lattice within the search radius, plus a few (compressed water and collisions give more;
 # the search grows the width and runs again when some particle has more).
 WIDTH_FACTOR = 1.4
-# The CG reads its residual back every so many iterations (a read waits for the GPU).
-CHECK_EVERY = 8
 
 _KERNELS: dict[str, Any] | None = None
 
@@ -512,9 +515,10 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
         rr = gathered(partial, slot, 1, shared)
         bb = gathered(partial, slot, 2, shared)
         iterations = 0
-        if bb == 0.0:
+        if bb == 0.0:  # nothing to solve: x = 0 (the CPU's CG too), no iteration
             for i in range(first, n, stride):
                 x[i] = 0.0
+            rr = 0.0
         limit = tolerance2 * bb
         while rr > limit and iterations < max_iterations:
             a = 0.0
@@ -588,6 +592,12 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
                 r2 += d * d
             if r2 > margin * margin:
                 wet[n] = 1
+
+    @cuda.jit
+    def any_not_finite(vector, flag):
+        i = cuda.grid(1)
+        if i < vector.shape[0] and not math.isfinite(vector[i]):
+            cuda.atomic.max(flag, 0, 1)
 
     @cuda.jit
     def fill(array, value):
@@ -897,6 +907,7 @@ class GPUSolver:
         self._lowest = da(n)
         self._partial = da((2, _grid(n), 3))  # the CG's block sums, two slots
         self._solve_out = da(3)
+        self._flag = da(1, dtype=np.int32)
         self._cg_blocks = 0  # the cooperative grid's blocks, found at the first solve
         self._extent = da(4)
         self._allocate_lists(self.width)
@@ -905,8 +916,12 @@ class GPUSolver:
     # -------------------------------------------------------------------------- host views
 
     def _download(self, name: str, array: Any) -> np.ndarray:
+        """The host copy of a state array, made once after each step; read-only, since a
+        write to it would not reach the GPU (:meth:`restore` writes the state)."""
         if name not in self._host:
-            self._host[name] = array.copy_to_host()
+            copy = array.copy_to_host()
+            copy.setflags(write=False)
+            self._host[name] = copy
         return self._host[name]
 
     @property
@@ -1020,6 +1035,8 @@ class GPUSolver:
             has_external = external_force is not None
             if has_external:
                 force = np.ascontiguousarray(external_force, dtype=np.float64)
+                if force.shape != (n, dim):  # the kernel reads row i of it, unchecked
+                    raise ValueError(f"external_force must be ({n}, {dim}), not {force.shape}")
                 if self._external.shape != force.shape:
                     self._external = self._cuda.to_device(force)
                 else:
@@ -1114,8 +1131,9 @@ class GPUSolver:
             self._cg_blocks = cooperative_blocks(kernel, args, _grid(self.n))
         kernel[self._cg_blocks, BLOCK](*args)
         iterations, rr, bb = self._solve_out.copy_to_host()
-        residual = math.sqrt(rr / bb) if bb > 0.0 else 0.0
-        if not (residual <= p.tolerance):
+        # a non-finite b (NaN or inf) gives a non-finite residual, as on the CPU
+        residual = 0.0 if bb == 0.0 else math.sqrt(rr / bb)
+        if not (residual <= p.tolerance) or not self._finite(self._x):
             raise FluidDiverged(
                 f"pressure solve stopped at relative residual {residual:.3g} after "
                 f"{int(iterations)} iterations (tolerance {p.tolerance:.3g}); reduce the time "
@@ -1125,6 +1143,12 @@ class GPUSolver:
                 residual=residual,
             )
         return int(iterations), residual
+
+    def _finite(self, vector: Any) -> bool:
+        """Whether every entry of the device vector is finite (one reduction, read back)."""
+        self.k["fill"][1, BLOCK](self._flag, 0)
+        self.k["any_not_finite"][_grid(self.n), BLOCK](vector, self._flag)
+        return int(self._flag.copy_to_host()[0]) == 0
 
     # ---------------------------------------------------------------------------- checkpoints
 
@@ -1150,13 +1174,15 @@ class GPUSolver:
             "number_density": self._d_density,
             "alive": self._d_alive,
         }
-        for name, target in targets.items():
-            value = np.ascontiguousarray(arrays[name], dtype=target.dtype)
-            if value.shape != target.shape:
-                raise ValueError(f"{name}: shape {value.shape}, expected {target.shape}")
-            target.copy_to_device(value)
+        values = {}
+        for name, target in targets.items():  # every shape checked before anything is written
+            values[name] = np.ascontiguousarray(arrays[name], dtype=target.dtype)
+            if values[name].shape != target.shape:
+                raise ValueError(f"{name}: shape {values[name].shape}, expected {target.shape}")
         if arrays["kind"].shape != self.kind.shape:
             raise ValueError(f"kind: shape {arrays['kind'].shape}, expected {self.kind.shape}")
+        for name, target in targets.items():
+            target.copy_to_device(values[name])
         self.kind[:] = arrays["kind"]
         self._d_kind.copy_to_device(self.kind)
         self._rows_all.copy_to_device((self.kind != DUMMY).astype(np.bool_))
@@ -1175,20 +1201,15 @@ def cooperative_blocks(kernel: Any, args: tuple[Any, ...], wanted: int) -> int:
     try:
         compiled = kernel.compile(tuple(numba.typeof(a) for a in args))
         most = int(compiled.max_cooperative_grid_blocks(BLOCK))
-    except Exception:  # noqa: BLE001 - an older Numba: two blocks a multiprocessor always fit
+    except Exception as error:  # noqa: BLE001 - measured on numba-cuda 0.30; others may differ
+        # two blocks of BLOCK threads a multiprocessor fit whatever the kernel's registers
         most = 2 * int(cuda.get_current_device().MULTIPROCESSOR_COUNT)
+        log.warning("the CG's cooperative grid: %s; using %d blocks", error, most)
     return max(1, min(wanted, most))
 
 
-def make_solver(
-    params: MPSParameters, positions: np.ndarray, kinds: np.ndarray, device: str
-) -> Any:
-    """The solver for ``device`` ("cpu": :class:`~jellysim.fluid.mps.MPSSolver`; "cuda":
-    :class:`GPUSolver`, or InputError saying what to install where no GPU can run it)."""
-    if device != "cuda":
-        from jellysim.fluid.mps import MPSSolver
-
-        return MPSSolver(params, positions, kinds)
+def solver_on_gpu(params: MPSParameters, positions: np.ndarray, kinds: np.ndarray) -> GPUSolver:
+    """A :class:`GPUSolver`, or InputError saying what to install where no GPU can run it."""
     reason = unavailable()
     if reason is not None:
         from jellysim.errors import InputError
@@ -1197,4 +1218,4 @@ def make_solver(
     return GPUSolver(params, positions, kinds)
 
 
-__all__ = ["BLOCK", "GPUSolver", "make_solver", "simulated", "unavailable"]
+__all__ = ["BLOCK", "GPUSolver", "simulated", "solver_on_gpu", "unavailable"]

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from jellysim.config.schema import Scene
 from jellysim.fluid.geometry import FLUID, filled_height, tank, water_block
-from jellysim.fluid.mps import MPSParameters
+from jellysim.fluid.mps import MPSParameters, MPSSolver
 
 
 def fluid_particles(scene: Scene) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
@@ -63,3 +65,16 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         tolerance=f.tolerance,
         courant=f.courant,
     )
+
+
+def make_solver(
+    params: MPSParameters, positions: np.ndarray, kinds: np.ndarray, device: str
+) -> Any:
+    """The fluid's solver on ``device`` (``fluid.device``): "cpu", :class:`MPSSolver`; "cuda",
+    :class:`jellysim.fluid.gpu.GPUSolver` (imported only then, with Numba's CUDA module), or
+    InputError saying what to install where no GPU can run it."""
+    if device == "cuda":
+        from jellysim.fluid.gpu import solver_on_gpu
+
+        return solver_on_gpu(params, positions, kinds)
+    return MPSSolver(params, positions, kinds)

@@ -17,9 +17,8 @@ from jellysim.config import Scene
 from jellysim.fields import Dataset
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.gpu import make_solver
 from jellysim.fluid.mps import MPSSolver
-from jellysim.fluid.setup import fluid_particles, mps_parameters
+from jellysim.fluid.setup import fluid_particles, make_solver, mps_parameters
 from jellysim.simulation.loop import Simulation, register_loop
 
 log = logging.getLogger(__name__)
