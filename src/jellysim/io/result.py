@@ -76,6 +76,8 @@ DIMENSIONS = {
     "S": "spring",
     "N": "fluid_particle",
     "D": "dimension",
+    "H": "height_probe",
+    "K": "pressure_probe",
 }
 
 
@@ -259,6 +261,8 @@ class ResultWriter:
                     fletcher32=True,
                 )
                 ds.attrs["units"] = spec.units
+                for key, value in spec.attributes:
+                    ds.attrs[key] = value
             for name, (array, units) in (static or {}).items():
                 f.create_dataset(name, data=array, fletcher32=array.size > 0)
                 f[name].attrs["units"] = units
