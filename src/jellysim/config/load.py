@@ -502,6 +502,8 @@ def _check_fluid(scene: Scene) -> None:
             "fluid.lattice = 'fcc' is 3-D only: set fluid.dimensions = 3, or "
             "fluid.lattice = 'hexagonal' (its 2-D analogue) or 'square'"
         )
+    _check_obstacles(scene)
+    _check_probes(scene)
     lengths = ["tank_width", "tank_height", "water_height"]
     if f.geometry == "dam-break":
         lengths.append("water_width")
@@ -531,8 +533,6 @@ def _check_fluid(scene: Scene) -> None:
         count *= f.tank_depth / f.spacing
     if count > 20_000_000:
         raise InputError(f"fluid: about {count:.3g} lattice cells in the tank; at most 20,000,000")
-    _check_obstacles(scene)
-    _check_probes(scene)
 
 
 def _tank_box(scene: Scene) -> tuple[list[float], list[float]]:
@@ -727,6 +727,13 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
                     name = ".".join(parts[: depth + 1])
                     raise InputError(f"{name} must be a table [{name}], got {_show(node)}")
             else:
+                if f.metadata["kind"] == "points" and depth == len(parts) - 2:
+                    # probes.height.NAME = [x, y]: one named point, added or replaced
+                    points = node.setdefault(part, {})
+                    if not isinstance(points, dict):
+                        raise InputError(f"--set {dotted}: '{part}' is not a table of points")
+                    points[parts[-1]] = value
+                    break
                 if not last:
                     raise InputError(f"--set {dotted}: '{part}' is a value, not a table")
                 node[part] = value

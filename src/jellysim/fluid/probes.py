@@ -11,9 +11,12 @@ Still water of depth H reads H (its layers tile the kernel); a lone splash parti
 ``V0 W(0)``, 0.17 l0 in 3-D on the fcc lattice.
 
 Pressure (Eq. F15): the wall pressure at a point ``c`` on a face is the weighted mean of the
-pressures of the wall particles within ``R = 2 l0``, ``p(c) = sum_j w_j p_j / sum_j w_j`` with
-``w_j = (1 - r_j / R)^2``; the wall particles carry the pressure of the Poisson equation
-(dummies do not). The walls do not move, so the weights are computed once. The result stores
+pressures of the wall particles of that face within ``R = 2 l0``, ``p(c) = sum_j w_j p_j /
+sum_j w_j`` with ``w_j = (1 - r_j / R)^2``; the wall particles carry the pressure of the Poisson
+equation (dummies do not). A wall particle belongs to the face whose plane is nearest to it
+among the tank's walls and the faces of the obstacle it is in (:func:`face_of`), so that a
+sensor near an edge (the box's P4 and P5, 0.021 m from its top edge) does not read the other
+face's walls. The walls do not move, so the weights are computed once. The result stores
 its mean over each frame's steps, weighted by their dt: single steps' pressures are noisy.
 """
 
@@ -52,21 +55,58 @@ class HeightProbes:
         return depths
 
 
+def face_of(points: np.ndarray, tank: np.ndarray, boxes: np.ndarray, margin: float) -> np.ndarray:
+    """(M,) int: the solid face each of ``points`` (M, D) m lies on or behind: the face of the
+    tank's walls (0 .. 2D - 2: the planes x = 0, y = 0, (z = 0,) then x = W, (y = depth)) or of
+    an obstacle box ``b`` (``2D - 1 + 2D b + f``, f as the tank's, with the top face) whose plane
+    is nearest, an obstacle's faces taking the points within ``margin`` (m) of its box, the
+    tank's the others (a wall particle belongs to the solid it was built in). ``tank``: the
+    tank's inner upper corner (D,) m; ``boxes``: (B, 2D) m, lower then upper corners."""
+    points = np.asarray(points, dtype=np.float64)
+    dim = points.shape[1]
+    # distances to the tank's planes: the lower ones, then the upper ones but the open top
+    planes = [np.abs(points[:, k]) for k in range(dim)]
+    planes += [np.abs(points[:, k] - tank[k]) for k in range(dim - 1)]
+    distance = np.column_stack(planes)
+    for box in np.asarray(boxes, dtype=np.float64).reshape(-1, 2 * dim):
+        lower, upper = box[:dim], box[dim:]
+        near = np.all((points > lower - margin) & (points < upper + margin), axis=1)
+        distance[near] = np.inf
+        faces = np.column_stack(
+            [np.abs(points[:, k] - lower[k]) for k in range(dim)]
+            + [np.abs(points[:, k] - upper[k]) for k in range(dim)]
+        )
+        # a face on the tank's wall or floor has no wall layer of its own (geometry.box_obstacle)
+        on_tank = np.concatenate([lower <= 0.0, upper[: dim - 1] >= tank[: dim - 1], [False]])
+        faces[:, on_tank] = np.inf
+        distance = np.column_stack([distance, np.where(near[:, None], faces, np.inf)])
+    return np.argmin(distance, axis=1)
+
+
 class PressureProbes:
     """Wall pressure (Pa) at ``points`` ((K, D) m), Eq. (F15), averaged over the steps of a
-    frame by :meth:`add_step` and :meth:`frame_mean`."""
+    frame by :meth:`add_step` and :meth:`frame_mean`. ``tank`` and ``boxes``: as
+    :func:`face_of`."""
 
     def __init__(
-        self, points: np.ndarray, position: np.ndarray, kind: np.ndarray, l0: float
+        self,
+        points: np.ndarray,
+        position: np.ndarray,
+        kind: np.ndarray,
+        l0: float,
+        tank: np.ndarray,
+        boxes: np.ndarray,
     ) -> None:
         self.points = np.asarray(points, dtype=np.float64).reshape(-1, position.shape[1])
         radius = PROBE_RADIUS * l0
         walls = np.flatnonzero(kind == WALL)
+        wall_faces = face_of(position[walls], tank, boxes, 1e-6 * l0)
+        probe_faces = face_of(self.points, tank, boxes, 0.5 * l0)  # as the scene checks
         self.rows: list[np.ndarray] = []
         self.weights: list[np.ndarray] = []
-        for point in self.points:
+        for point, face in zip(self.points, probe_faces, strict=True):
             r = np.sqrt(((position[walls] - point) ** 2).sum(axis=1))
-            near = r < radius
+            near = (r < radius) & (wall_faces == face)
             if not near.any():
                 raise ValueError(f"no wall particle within {radius:g} m of the probe at {point}")
             w = (1.0 - r[near] / radius) ** 2

@@ -4,6 +4,10 @@
 of liquid columns on a rigid horizontal plane", Phil. Trans. R. Soc. A 244, Fig. for n^2 = 2
 (column height 2a, width a, a = 2.25 in): surge-front position Z = x_front / a against
 T = t sqrt(2 g / a).
+
+``kleefsman_2005_spheric_test2.csv``: SPHERIC benchmark Test 2, the dam break with a box of
+Kleefsman et al. (2005): the pressure sensors P1-P8 (Pa) and height gauges H1-H4 (m) against t,
+5 ms means of the 1 kHz record (the file's header).
 """
 
 from __future__ import annotations
@@ -21,6 +25,16 @@ def martin_moyce() -> tuple[np.ndarray, np.ndarray]:
     rows = [line for line in text.splitlines() if line and not line.startswith(("#", "T,"))]
     data = np.array([[float(v) for v in row.split(",")] for row in rows])
     return data[:, 0], data[:, 1]
+
+
+def spheric_test2() -> dict[str, np.ndarray]:
+    """SPHERIC Test 2's measurements: ``t`` (s), ``P1``-``P8`` (Pa), ``H1``-``H4`` (m), each
+    (1200,), named as the preset ``spheric-test2`` names its probes."""
+    text = resources.files(__package__).joinpath("kleefsman_2005_spheric_test2.csv").read_text()
+    lines = [line for line in text.splitlines() if line and not line.startswith("#")]
+    names = lines[0].split(",")
+    data = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    return {name: data[:, k] for k, name in enumerate(names)}
 
 
 def surge_front(

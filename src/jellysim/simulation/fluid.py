@@ -80,8 +80,16 @@ class Probes:
         self.height = HeightProbes(
             np.array([place for _, place in p.height]), l0, dim, scene.fluid.lattice
         )
+        f = scene.fluid
+        tank = np.array([f.tank_width, f.tank_depth, f.tank_height][3 - dim :])
+        tank[0] = f.tank_width
         self.pressure = PressureProbes(
-            np.array([point for _, point in p.pressure]), solver.position, solver.kind, l0
+            np.array([point for _, point in p.pressure]),
+            solver.position,
+            solver.kind,
+            l0,
+            tank,
+            np.array(f.obstacles).reshape(-1, 2 * dim),
         )
 
     def after_step(self, dt: float) -> None:
