@@ -37,6 +37,19 @@ def spheric_test2() -> dict[str, np.ndarray]:
     return {name: data[:, k] for k, name in enumerate(names)}
 
 
+def arrival(times: np.ndarray, values: np.ndarray, threshold: float) -> float:
+    """The first time (s) at which ``values`` (F,) reach ``threshold``, linearly interpolated
+    between ``times`` (F,) s; nan when they never do."""
+    above = np.flatnonzero(values >= threshold)
+    if len(above) == 0:
+        return float("nan")
+    k = int(above[0])
+    if k == 0:
+        return float(times[0])
+    t0, t1, v0, v1 = times[k - 1], times[k], values[k - 1], values[k]
+    return float(t0 + (threshold - v0) / (v1 - v0) * (t1 - t0))
+
+
 def surge_front(
     positions: np.ndarray, alive: np.ndarray, fluid: np.ndarray, column_width: float
 ) -> np.ndarray:
