@@ -50,6 +50,49 @@ def arrival(times: np.ndarray, values: np.ndarray, threshold: float) -> float:
     return float(t0 + (threshold - v0) / (v1 - v0) * (t1 - t0))
 
 
+def spheric_test2_measures(times: np.ndarray, probes: dict[str, np.ndarray]) -> dict[str, float]:
+    """What docs/fluid.md and the validation test compare of a run of ``spheric-test2``:
+    ``times`` (F,) s and each probe's (F,) record by name against the measurements, each
+    simulated value beside the measured one (``..._measured``): the time at which H2 reaches
+    2 cm and P1 2 kPa (the front's arrival and the impact), P1's largest value in 0.35-0.6 s,
+    the means of P1 and P3 over 0.6-1 s (the flow piled up at the face), the largest of P5 and
+    P7 before 0.9 s (the box's top, dry then), and the RMS differences of H2 and H4 over the run
+    (m). Keys whose probes or times the run lacks are left out."""
+    data = spheric_test2()
+    out: dict[str, float] = {}
+
+    def measured(name: str) -> np.ndarray:
+        return np.interp(times, data["t"], data[name])
+
+    if "H2" in probes:
+        out["H2_arrival"] = arrival(times, probes["H2"], 0.02)
+        out["H2_arrival_measured"] = arrival(data["t"], data["H2"], 0.02)
+    for name in ("H2", "H4"):
+        if name in probes:
+            out[f"{name}_rms"] = float(np.sqrt(np.mean((probes[name] - measured(name)) ** 2)))
+    if "P1" in probes:
+        out["P1_arrival"] = arrival(times, probes["P1"], 2000.0)
+        out["P1_arrival_measured"] = arrival(data["t"], data["P1"], 2000.0)
+        window, reference = (times > 0.35) & (times < 0.6), (data["t"] > 0.35) & (data["t"] < 0.6)
+        if window.any():
+            out["P1_peak"] = float(probes["P1"][window].max())
+            out["P1_peak_measured"] = float(data["P1"][reference].max())
+    later = (times >= 0.6) & (times <= 1.0)
+    if later.any() and times[-1] >= 1.0:
+        for name in ("P1", "P3"):
+            if name in probes:
+                out[f"{name}_mean"] = float(probes[name][later].mean())
+                out[f"{name}_mean_measured"] = float(measured(name)[later].mean())
+    dry = times <= 0.9
+    top = [name for name in ("P5", "P7") if name in probes]
+    if top:
+        out["top_before_0.9"] = float(max(probes[name][dry].max() for name in top))
+        out["top_before_0.9_measured"] = float(
+            max(data[name][data["t"] <= 0.9].max() for name in top)
+        )
+    return out
+
+
 def surge_front(
     positions: np.ndarray, alive: np.ndarray, fluid: np.ndarray, column_width: float
 ) -> np.ndarray:
