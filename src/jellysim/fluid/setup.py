@@ -46,6 +46,15 @@ def fluid_particles(scene: Scene) -> tuple[np.ndarray, np.ndarray, dict[str, flo
     return positions, all_kinds, attributes
 
 
+def tank_corner(scene: Scene) -> np.ndarray:
+    """The tank's inner upper corner (D,) m: its width, (depth,) and height; the inner lower
+    corner is the origin."""
+    f = scene.fluid
+    if f.dimensions == 3:
+        return np.array([f.tank_width, f.tank_depth, f.tank_height])
+    return np.array([f.tank_width, f.tank_height])
+
+
 def mps_parameters(scene: Scene) -> MPSParameters:
     """The solver's parameters from the scene's ``[fluid]`` and ``[water]`` tables."""
     f, w = scene.fluid, scene.water

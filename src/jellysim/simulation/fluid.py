@@ -20,7 +20,7 @@ from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
 from jellysim.fluid.mps import MPSSolver
 from jellysim.fluid.probes import HeightProbes, PressureProbes
-from jellysim.fluid.setup import fluid_particles, mps_parameters
+from jellysim.fluid.setup import fluid_particles, mps_parameters, tank_corner
 from jellysim.simulation.loop import Simulation, register_loop
 
 log = logging.getLogger(__name__)
@@ -80,20 +80,22 @@ class Probes:
         self.height = HeightProbes(
             np.array([place for _, place in p.height]), l0, dim, scene.fluid.lattice
         )
-        f = scene.fluid
-        tank = np.array([f.tank_width, f.tank_depth, f.tank_height][3 - dim :])
-        tank[0] = f.tank_width
         self.pressure = PressureProbes(
             np.array([point for _, point in p.pressure]),
             solver.position,
             solver.kind,
             l0,
-            tank,
-            np.array(f.obstacles).reshape(-1, 2 * dim),
+            tank_corner(scene),
+            np.array(scene.fluid.obstacles).reshape(-1, 2 * dim),
         )
+        self.end_frame()  # frame 0 (or a restored frame): the pressure now
 
     def after_step(self, dt: float) -> None:
         self.pressure.add_step(self.solver.pressure, dt)
+
+    def end_frame(self) -> None:
+        """Close the frame's pressure means (called once a frame, after its steps)."""
+        self.frame_pressure = self.pressure.frame_mean(self.solver.pressure)
 
     def frame_values(self) -> dict[str, np.ndarray]:
         s = self.solver
@@ -101,7 +103,7 @@ class Probes:
         if self.height_names:
             values[fields.PROBE_HEIGHT.path] = self.height.measure(s.position, s.kind, s.alive)
         if self.pressure_names:
-            values[fields.PROBE_PRESSURE.path] = self.pressure.frame_mean(s.pressure)
+            values[fields.PROBE_PRESSURE.path] = self.frame_pressure.copy()
         return values
 
     def datasets(self) -> list[Dataset]:
@@ -148,6 +150,8 @@ class FluidSimulation(Simulation):
             self.stats,
             after_step=None if self.probes is None else self.probes.after_step,
         )
+        if self.probes is not None:
+            self.probes.end_frame()
         self.frame += 1
         self.notify()
 
@@ -181,6 +185,8 @@ class FluidSimulation(Simulation):
         self.stats.restore(state.pop("last"))
         self.solver.restore(state)
         self.frame = frame
+        if self.probes is not None:
+            self.probes.end_frame()  # the restored frame's pressure, and no steps half-counted
 
     def finish(self) -> None:
         report(self.solver, self.stats)
