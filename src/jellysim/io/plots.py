@@ -446,8 +446,8 @@ def probes_plot(result: Result, path: Path) -> Path:
         ax.grid(alpha=0.3)
     for ax in axes.ravel()[len(panels) :]:
         ax.set_visible(False)
-    for ax in axes[-1]:
-        ax.set_xlabel("t (s)")
+    for ax in axes.ravel()[max(0, len(panels) - columns) : len(panels)]:
+        ax.set_xlabel("t (s)")  # the lowest panel of each column
     axes[0, 0].legend(loc="best", fontsize=8)
     l0 = float(result.file.attrs.get("particle_spacing", 0.0))
     fig.suptitle(f"{result.scene.name}: probes (l0 = {l0:g} m)", fontsize=11)
