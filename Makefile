@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-all lint docs clean venv povray web chromium tbb fish blender
+.PHONY: demo test test-all test-gpu lint docs clean venv povray web chromium tbb fish blender
 
 # A virtual environment with jellysim installed (editable). On Debian/Ubuntu the venv module
 # lives in the python3-venv package: installed here when run as root, otherwise named.
@@ -136,6 +136,12 @@ test: $(BIN)/jellysim povray web chromium tbb fish blender
 # Every test, slow ones included.
 test-all: $(BIN)/jellysim povray web chromium tbb fish blender
 	$(BIN)/python -m pytest -q --runslow
+
+# The GPU path's tests on a real NVIDIA GPU (numba-cuda: pip install jellysim[cuda]); without
+# one they skip. make test runs the same kernels in Numba's CUDA simulator on tiny scenes.
+test-gpu: $(BIN)/jellysim
+	$(BIN)/pip install -q -e '.[cuda]'
+	JELLYSIM_TEST_GPU=1 $(BIN)/python -m pytest -q tests/gpu
 
 lint: $(BIN)/jellysim
 	$(BIN)/ruff check src tests benchmarks

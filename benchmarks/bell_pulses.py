@@ -10,7 +10,10 @@ the pulse, and the rise of the bell's centre; the muscle is the preset's. The pr
 
 ``--full`` runs the ``moon-jelly`` preset itself (l0 = 0.16 m, its 320 N/m springs, five 2 s
 pulses; 35-65 minutes on 2 cores) and ignores the factors; ``--set KEY=VALUE`` (repeatable)
-changes a key of it as ``jellysim run --set`` does, e.g. ``--set bell.spring_stiffness=320``.
+changes a key of it as ``jellysim run --set`` does, e.g. ``--set bell.spring_stiffness=320``
+or ``--set fluid.device='"cuda"'``. ``--pulses N`` runs N pulses instead of five;
+``--no-tentacles`` leaves the preset's tentacle groups out (the bell alone: with
+``flow.two_way`` false, the preset's, tentacles do not act on the bell or the water).
 """
 
 from __future__ import annotations
@@ -35,23 +38,27 @@ PERIOD = 2.0  # s, the moon-jelly preset's pulse
 
 
 def pulses(
-    factor: float | None, out: Path, changes: dict[str, object] | None = None
+    factor: float | None,
+    out: Path,
+    changes: dict[str, object] | None = None,
+    count: int = PULSES,
+    scene: str = "moon-jelly",
 ) -> list[tuple[float, float, float]]:
-    """(peak, lowest after it, rise in m) for each pulse of the run at ``factor`` (None: the
-    ``moon-jelly`` preset as it is, with ``changes``)."""
-    overrides: dict[str, object] = {"duration": PULSES * PERIOD, **(changes or {})}
+    """(peak, lowest after it, rise in m) for each of ``count`` pulses of the run at ``factor``
+    (None: the ``moon-jelly`` preset, or the scene file ``scene``, with ``changes``)."""
+    overrides: dict[str, object] = {"duration": count * PERIOD, **(changes or {})}
     if factor is not None:
         # SWIM's material is the paper's; the factor sets the springs, the preset the muscle
         coarse = {k: v for k, v in SWIM.items() if not k.startswith("bell.muscle_")}
-        overrides.update(coarse, duration=PULSES * SWIM_PERIOD)
+        overrides.update(coarse, duration=count * SWIM_PERIOD)
         overrides["bell.spring_stiffness"] = PAPER_K_COARSE * factor
     period = PERIOD if factor is None else SWIM_PERIOD
-    with jellysim.run("moon-jelly", out, overrides=overrides, force=True) as result:
+    with jellysim.run(scene, out, overrides=overrides, force=True) as result:
         t = np.asarray(result.time)
         contraction = result.bell_contraction
         height = result.bell_centre[:, 2]
     rows = []
-    for k in range(PULSES):
+    for k in range(count):
         first = int(np.argmin(np.abs(t - k * period)))
         last = int(np.argmin(np.abs(t - (k + 1) * period)))
         peak = first + int(np.argmax(contraction[first : last + 1]))
@@ -71,15 +78,33 @@ def main() -> None:
     parser.add_argument("--out", default="out/bell-pulses")
     parser.add_argument("--full", action="store_true")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--pulses", type=int, default=PULSES)
+    parser.add_argument("--no-tentacles", action="store_true")
     args = parser.parse_args()
+    scene = "moon-jelly"
+    if args.no_tentacles:
+        import tomli_w
+
+        from jellysim.config.scenes import scene_source_tree
+
+        tree = {**scene_source_tree("moon-jelly"), "tentacles": {"count": 0}}
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        scene = str(Path(args.out) / "moon-jelly-bell-only.toml")
+        Path(scene).write_text(tomli_w.dumps(tree))
     changes: dict[str, object] = dict(parse_override(item) for item in args.set)
     factors: list[float | None] = [None] if args.full else list(args.factors)
     for factor in factors:
         start = time.perf_counter()
         name = "full" if factor is None else f"k{factor:g}"
-        rows = pulses(factor, Path(args.out) / name, changes if factor is None else None)
+        rows = pulses(
+            factor,
+            Path(args.out) / name,
+            changes if factor is None else None,
+            args.pulses,
+            scene,
+        )
         label = (
-            ("moon-jelly as it is" + "".join(f", {item}" for item in args.set))
+            (f"{Path(scene).stem} as it is" + "".join(f", {item}" for item in args.set))
             if factor is None
             else (f"factor {factor:g} (k = {PAPER_K_COARSE * factor:g} N/m)")
         )

@@ -3,8 +3,15 @@ before anything loads NumPy), and tests marked ``slow`` run only with ``--runslo
 
 from __future__ import annotations
 
+import os
+
 import pinning  # noqa: F401  (first: it sets the environment NumPy and Numba read on import)
 import pytest
+
+# The GPU path's kernels run in Numba's CUDA simulator (read when Numba loads), unless the suite
+# runs on a GPU for them (make test-gpu sets JELLYSIM_TEST_GPU=1).
+if os.environ.get("JELLYSIM_TEST_GPU") != "1":
+    os.environ.setdefault("NUMBA_ENABLE_CUDASIM", "1")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -76,6 +76,15 @@ NOT_RUN = {
     "its jellysim steps are run here (the README's run and render of brown-jelly) and in "
     "tests/integration/test_cli_smoke.py (plot of brown-jelly)",
     "make test": "runs the test suite (what CI runs), this test included",
+    'pip install "jellysim[cuda]"': "downloads numba-cuda and the CUDA libraries: not inside a "
+    "test (CI has no GPU); tests/unit/test_fluid_gpu.py runs the GPU kernels in Numba's CUDA "
+    "simulator",
+    "jellysim run tank-3d --device cuda": "needs an NVIDIA GPU, which CI has not; "
+    "tests/unit/test_fluid_gpu.py runs the kernels in the simulator against the CPU path, and "
+    "runs '--device cuda' without a GPU (exit 2, one line)",
+    "jellysim run dam-break-2d --device cuda --out out/dam-break-2d-gpu": "needs an NVIDIA GPU; "
+    "measured on one (docs/performance.md), and tests/unit/test_fluid_gpu.py runs the kernels "
+    "in the simulator",
     "make web": "npm ci downloads three.js and the test tools from the registry (development "
     "only: the package ships three.js); 'make test' runs it before the suite",
     "blender --background --python out/brown-jelly/export/usd/import_into_blender.py -- "
@@ -250,8 +259,12 @@ EXAMPLES, PROBLEMS = collect()
 
 
 def is_run(example: Example) -> bool:
+    """Python blocks and jellysim commands, but for the jellysim commands NOT_RUN lists (those
+    that need a GPU)."""
     if example.kind == "python":
         return True
+    if example.text in NOT_RUN:
+        return False
     return all(part[0] in JELLYSIM for part in parts(example.text))
 
 

@@ -67,6 +67,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("scene", help="preset name (see 'jellysim presets') or path to a .toml")
     run.add_argument("--out", help="output folder (default: out/<scene name>)")
     _add_set_option(run, "KEY=VALUE", "override a scene key, VALUE read as TOML (repeatable)")
+    run.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        help="where the fluid is stepped (the same as --set fluid.device=...): 'cuda' for an "
+        "NVIDIA GPU",
+    )
     run.add_argument("--resume", action="store_true", help="continue a killed run")
     run.add_argument("--force", action="store_true", help="replace an existing result")
     run.add_argument("--quiet", action="store_true", help="no progress and no messages")
@@ -253,7 +259,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from jellysim.config import load_scene
     from jellysim.simulation import run
 
-    scene = load_scene(args.scene, args.overrides)
+    overrides = list(args.overrides)
+    if args.device is not None:
+        overrides.append(f"fluid.device={args.device!r}")
+    scene = load_scene(args.scene, overrides)
     if not args.quiet:
         logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     result = run(

@@ -847,10 +847,15 @@ def same_scene(first: str, second: str) -> bool:
     changes the text, not the scene (docs/decisions.md, "Slender drag and currents"), except
     ``flow.model``, ``bell.root_placement``, ``bell.arm_anchor`` and ``bell.tentacle_contact``,
     whose defaults are no longer what older texts ran (:func:`recorded_tree`). A text that does
-    not read as a scene is no match."""
+    not read as a scene is no match. ``fluid.device`` says where the fluid is stepped, not what
+    is simulated: a run checkpointed on a GPU resumes on the CPU and the other way round."""
     if first == second:
         return True
     try:
-        return scene_from_tree(recorded_tree(first)) == scene_from_tree(recorded_tree(second))
+        scenes = [scene_from_tree(recorded_tree(text)) for text in (first, second)]
     except (InputError, tomllib.TOMLDecodeError):
         return False
+    on_cpu = [
+        dataclasses.replace(s, fluid=dataclasses.replace(s.fluid, device="cpu")) for s in scenes
+    ]
+    return on_cpu[0] == on_cpu[1]

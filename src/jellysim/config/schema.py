@@ -615,6 +615,14 @@ class Fluid:
         "Jacobi and a coarse problem on aggregates of particles (two-level deflation, Tang et "
         "al. 2009; docs/fluid.md)",
     )
+    device: str = param(
+        "cpu",
+        kind="choice",
+        choices=("cpu", "cuda"),
+        doc="where the fluid is stepped: 'cpu' (the CPU cores), or 'cuda' (an NVIDIA GPU, "
+        "`pip install jellysim[cuda]`; the pressure by Jacobi-preconditioned CG whatever "
+        "fluid.solver says; a soft bell's springs stay on the CPU; docs/fluid.md)",
+    )
     coarse_cell: float = param(
         4.0,
         ge=2.0,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +25,8 @@ from jellysim.coupling.water_at import spread_reaction
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.mps import MPSParameters, MPSSolver
+from jellysim.fluid.gpu import make_solver
+from jellysim.fluid.mps import MPSParameters
 from jellysim.fluid.setup import fluid_particles, mps_parameters
 from jellysim.tentacle.layout import root_layout
 
@@ -74,7 +76,9 @@ class BellInFluid:
             [np.arange(len(water)), np.arange(self.bell_rows.stop, len(order))]
         )
         params = water_parameters(scene)
-        self.solver = MPSSolver(params, positions[order], kinds[order])
+        # the water on the CPU or the GPU (fluid.device); the springs on the CPU either way
+        self.solver: Any = make_solver(params, positions[order], kinds[order], scene.fluid.device)
+        self.on_gpu = scene.fluid.device == "cuda"
         l0 = params.l0
         self.body = SoftBell(scene, shape, rest)
         layout = root_layout(scene)
@@ -123,7 +127,8 @@ class BellInFluid:
             1e-3,
             self._bell_force.copy(),
         )
-        compile_on_copy(self.solver, self._force)
+        if not self.on_gpu:  # the GPU's kernels compile in the first step
+            compile_on_copy(self.solver, self._force)
 
     def _spring_force_density(self, time: float, dt: float) -> np.ndarray:
         """The bell's springs and muscle over the step from ``time`` (Eq. B8-B9), as the force

@@ -18,6 +18,7 @@ from jellysim.config import Scene
 from jellysim.fields import Dataset
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
+from jellysim.fluid.gpu import make_solver
 from jellysim.fluid.mps import MPSSolver
 from jellysim.fluid.probes import HeightProbes, PressureProbes
 from jellysim.fluid.setup import fluid_particles, mps_parameters, tank_corner
@@ -125,7 +126,7 @@ class FluidSimulation(Simulation):
     def __init__(self, scene: Scene) -> None:
         super().__init__(scene)
         positions, kinds, self.geometry = fluid_particles(scene)
-        self.solver = MPSSolver(mps_parameters(scene), positions, kinds)
+        self.solver: Any = make_solver(mps_parameters(scene), positions, kinds, scene.fluid.device)
         self.stats = FrameStats()
         self.probes = (
             Probes(scene, self.solver) if scene.probes.height or scene.probes.pressure else None
@@ -133,13 +134,17 @@ class FluidSimulation(Simulation):
 
     def describe(self) -> str:
         fluid = int(np.sum(self.solver.kind == FLUID))
+        gpu = self.scene.fluid.device == "cuda"
+        where = ", on the GPU (Jacobi-preconditioned CG)" if gpu else ""
         return (
             f"MPS {self.scene.fluid.dimensions}-D, {fluid} fluid and "
             f"{len(self.solver.kind) - fluid} wall particles, l0 = {self.solver.params.l0:g} m"
+            f"{where}"
         )
 
     def prepare(self) -> None:
-        compile_on_copy(self.solver)
+        if self.scene.fluid.device == "cpu":  # the GPU's kernels compile in the first step
+            compile_on_copy(self.solver)
 
     def step_frame(self) -> None:
         """Advance the fluid to the next frame time; raise SimulationUnstable if it diverged."""

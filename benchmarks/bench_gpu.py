@@ -1,0 +1,146 @@
+"""The MPS fluid on a GPU (fluid.device = "cuda") beside the CPU path: steps per second, the
+time per phase, particle-steps per second and wall time per simulated second, and how far the
+two paths' water is apart after the same steps.
+
+    python benchmarks/bench_gpu.py [--case NAME ...] [--steps 20] [--cpu-threads 16]
+        [--compare-steps 20]
+
+Cases, each from rest at its preset's scheme (the pressure to a relative residual of 1e-8):
+
+- ``tank-3d``: the 3-D dam break of bench_fluid.py at a / l0 = 30 (54,000 fluid particles);
+- ``moon-jelly-water``: moon-jelly's water without its bell (its tank, spacing and scheme: a
+  filled 6.4 m tank at l0 = 0.16 m, 57,600 fluid particles, mixed source, corrected gradient),
+  the fluid issue 28 asks 200 steps/s of;
+- ``tank-3d-million``: tank-3d at a / l0 = 80 (1,024,000 fluid particles).
+
+``--cpu-threads N`` (0: none) also times the CPU path on N threads for the cases under 100,000
+particles; ``--compare-steps K`` then steps both paths K times with the CPU's dt and prints the
+largest distance between their fluid particles (the paths sum in other orders and solve with
+other preconditioners: they agree to the solver's tolerance, which grows with the steps).
+Walls and dummies are not counted in particle-steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numba
+import numpy as np
+
+import jellysim
+from jellysim.fluid.geometry import FLUID
+from jellysim.simulation.fluid import FluidSimulation
+
+CASES: dict[str, tuple[str, dict[str, object]]] = {
+    "tank-3d": ("tank-3d", {"fluid.spacing": 0.1 / 30}),
+    "moon-jelly-water": (
+        "hydrostatic-3d",
+        {
+            "fluid.spacing": 0.16,
+            "fluid.tank_width": 6.4,
+            "fluid.tank_depth": 6.4,
+            "fluid.tank_height": 6.4,
+            "fluid.water_height": 5.76,
+            "fluid.lattice": "square",
+            "fluid.surface": "standard",
+            "fluid.surface_repulsion": False,
+            "fluid.collision_distance": 0.5,
+        },
+    ),
+    "tank-3d-million": ("tank-3d", {"fluid.spacing": 0.1 / 80}),
+}
+
+
+def _time_steps(solver, steps: int) -> tuple[float, dict[str, float], list[int], float]:
+    """Seconds for ``steps`` steps at the stable dt, the seconds per phase, the iterations and
+    the simulated time covered."""
+    seconds: dict[str, float] = {}
+    iterations = []
+    started = solver.time
+    clock = time.perf_counter()
+    for _ in range(steps):
+        stats = solver.step(solver.stable_dt())
+        iterations.append(stats.iterations)
+        for phase, value in stats.seconds.items():
+            seconds[phase] = seconds.get(phase, 0.0) + value
+    return time.perf_counter() - clock, seconds, iterations, solver.time - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--case", choices=tuple(CASES), action="append")
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--cpu-threads", type=int, default=0)
+    parser.add_argument("--compare-steps", type=int, default=0)
+    args = parser.parse_args()
+    from jellysim.fluid import gpu
+
+    if gpu.simulated():
+        name = "none (Numba's CUDA simulator)"
+    else:
+        from numba import cuda
+
+        name = str(cuda.get_current_device().name)
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores; GPU {name!s}; "
+        f"numba {numba.__version__}"
+    )
+    for case in args.case or list(CASES):
+        preset, overrides = CASES[case]
+        scene = jellysim.load_scene(preset, {**overrides, "fluid.device": "cuda"})
+        clock = time.perf_counter()
+        simulation = FluidSimulation(scene)
+        device = simulation.solver
+        fluid = int(np.sum(device.kind == FLUID))
+        device.step(device.stable_dt())  # compiles the kernels
+        first = time.perf_counter() - clock
+        wall, seconds, iterations, simulated = _time_steps(device, args.steps)
+        phases = ", ".join(f"{k} {1000 * v / args.steps:.2f} ms" for k, v in seconds.items())
+        print(
+            f"{case} GPU: {fluid} fluid + {len(device.kind) - fluid} wall/dummy particles "
+            f"(set-up and first step {first:.1f} s); {args.steps / wall:.1f} steps/s, "
+            f"{fluid * args.steps / wall:.3g} particle-steps/s, "
+            f"{wall / simulated:.1f} s per simulated second (dt {simulated / args.steps:.3g} s); "
+            f"Jacobi-CG iterations {np.mean(iterations):.0f} (mean); per step: {phases}; "
+            f"neighbour-list width {device.width}",
+            flush=True,
+        )
+        if args.cpu_threads <= 0 or fluid > 100_000:
+            continue
+        numba.set_num_threads(args.cpu_threads)
+        cpu_scene = jellysim.load_scene(preset, overrides)
+        cpu = FluidSimulation(cpu_scene).solver
+        cpu.step(cpu.stable_dt())  # compile, or load from Numba's cache
+        wall, seconds, iterations, simulated = _time_steps(cpu, min(args.steps, 10))
+        steps = min(args.steps, 10)
+        print(
+            f"{case} CPU, {args.cpu_threads} threads: {steps / wall:.2f} steps/s, "
+            f"{fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s per simulated "
+            f"second; {cpu_scene.fluid.solver} iterations {np.mean(iterations):.0f}",
+            flush=True,
+        )
+        if args.compare_steps <= 0:
+            continue
+        cpu = FluidSimulation(cpu_scene).solver
+        device = FluidSimulation(scene).solver
+        rows = cpu.kind == FLUID
+        for _ in range(args.compare_steps):
+            dt = cpu.stable_dt()
+            cpu.step(dt)
+            device.step(dt)
+        apart = np.abs(cpu.position[rows] - device.position[rows]).max()
+        speed = np.abs(cpu.velocity[rows]).max()
+        print(
+            f"{case}: after {args.compare_steps} steps (t = {cpu.time:.4f} s) the paths' fluid "
+            f"particles are at most {apart:.3g} m = {apart / cpu.params.l0:.3g} l0 apart "
+            f"(largest speed {speed:.3g} m/s, velocities at most "
+            f"{np.abs(cpu.velocity[rows] - device.velocity[rows]).max():.3g} m/s apart)",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
