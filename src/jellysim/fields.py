@@ -6,8 +6,9 @@ them, so the layout of DESIGN §3 is spelled in one place.
 
 Axis names: F frames, T simulated tentacles, P particles per tentacle, R margin points,
 B bell particles, V bell surface vertices, M surface triangles, S springs, N fluid particles
-(water and tank), D the fluid's dimensions (2 or 3). A field's ``axes`` are the axes of one frame
-(per-frame fields) or of the whole array (static fields).
+(water and tank), D the fluid's dimensions (2 or 3), H height probes, K pressure probes. A
+field's ``axes`` are the axes of one frame (per-frame fields) or of the whole array (static
+fields).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ class Dataset:
     frame_shape: tuple[int, ...]
     units: str
     dtype: Any = np.float64
+    # further attributes of the dataset (name, value), e.g. the probes' names
+    attributes: tuple[tuple[str, Any], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -132,6 +135,12 @@ FLUID_ALIVE = Field(
 )
 FLUID_KIND = Field("fluid/kind", ("N",), "1", "0 fluid, 1 wall, 2 dummy", np.int8, False)
 
+# Probes of a fluid-only scene (docs/theory/fluid.md F14, F15); each with an attribute `names`.
+PROBE_HEIGHT = Field("probes/height", ("H",), "m", "water depth along each height probe's line")
+PROBE_PRESSURE = Field(
+    "probes/pressure", ("K",), "Pa", "wall pressure at each pressure probe, the frame's mean"
+)
+
 # The pressure solver.
 SOLVER_ITERATIONS = Field(
     "solver/iterations", (), "1", "pressure-solver iterations of the frame's last step", np.int32
@@ -166,6 +175,8 @@ FIELDS: tuple[Field, ...] = (
     FLUID_NUMBER_DENSITY,
     FLUID_ALIVE,
     FLUID_KIND,
+    PROBE_HEIGHT,
+    PROBE_PRESSURE,
     SOLVER_ITERATIONS,
     SOLVER_RESIDUAL,
     SOLVER_STEPS,

@@ -146,6 +146,66 @@ GROUP_CASES = {
 }
 
 
+# Obstacles and probes (issue 28, SPHERIC Test 2), on the preset that has them.
+SPHERIC = "spheric-test2"
+PROBE_CASES = {
+    "obstacle-outside-the-tank": (
+        ("--set", "fluid.obstacles=[[3.0, 0.3, 0.0, 3.5, 0.7, 0.161]]"),
+        ("fluid.obstacles[0] = [3.0, 0.3, 0.0, 3.5, 0.7, 0.161]", "not inside the tank"),
+    ),
+    "obstacle-in-the-water": (
+        ("--set", "fluid.obstacles=[[2.5, 0.3, 0.0, 2.8, 0.7, 0.161]]"),
+        ("fluid.obstacles[0]", "overlaps the water"),
+    ),
+    "obstacle-upside-down": (
+        ("--set", "fluid.obstacles=[[0.8, 0.3, 0.0, 0.6, 0.7, 0.161]]"),
+        ("fluid.obstacles = [[0.8, 0.3, 0.0, 0.6, 0.7, 0.161]]", "x0 < x1"),
+    ),
+    "obstacle-too-thin": (
+        ("--set", "fluid.obstacles=[[0.6, 0.3, 0.0, 0.62, 0.7, 0.161]]"),
+        ("fluid.obstacles[0]", "too thin"),
+    ),
+    "height-probe-outside": (
+        ("--set", "probes.height.H2=[4.0, 0.5]"),
+        ("probes.height.H2 = [4.0, 0.5]", "not inside the tank"),
+    ),
+    "height-probe-in-3-d": (
+        ("--set", "probes.height.H2=[1.0, 0.5, 0.2]"),
+        ("probes.height.H2", "expected 2 coordinates"),
+    ),
+    "pressure-probe-in-the-water": (
+        ("--set", "probes.pressure.P1=[1.5, 0.5, 0.3]"),
+        ("probes.pressure.P1 = [1.5, 0.5, 0.3]", "not on a wall"),
+    ),
+    "pressure-probe-outside": (
+        ("--set", "probes.pressure.P1=[0.8245, 1.5, 0.021]"),
+        ("probes.pressure.P1", "not on a wall"),
+    ),
+    "probe-not-a-table": (
+        ("--set", "probes.pressure=[1, 2, 3]"),
+        ("probes.pressure = [1, 2, 3]", "NAME = [x, ...]"),
+    ),
+    "obstacles-in-2-d": (
+        (
+            "--set",
+            "fluid.dimensions=2",
+            "--set",
+            "fluid.lattice=hexagonal",
+            "--set",
+            "water.gravity=[0, -9.81, 0]",
+        ),
+        ("fluid.obstacles", "3-D fluid-only scenes"),
+    ),
+}
+
+
+@pytest.mark.parametrize(("args", "named"), PROBE_CASES.values(), ids=PROBE_CASES)
+def test_bad_obstacle_or_probe(
+    tmp_path: Path, args: tuple[str, ...], named: tuple[str, ...]
+) -> None:
+    check_subprocess(tmp_path, ("run", SPHERIC, *args), named)
+
+
 @pytest.mark.parametrize(("args", "named"), GROUP_CASES.values(), ids=GROUP_CASES)
 def test_bad_group_option(tmp_path: Path, args: tuple[str, ...], named: tuple[str, ...]) -> None:
     check_subprocess(tmp_path, ("run", GROUPED, *args), named)

@@ -30,6 +30,7 @@ EXPECTED_LOOP = {
     "hydrostatic-2d": "fluid",
     "hydrostatic-3d": "fluid",
     "tank-3d": "fluid",
+    "spheric-test2": "fluid",
     "moon-jelly": "soft-bell",
     "moon-jelly-weightless": "soft-bell",
     "moon-jelly-real-size": "soft-bell",

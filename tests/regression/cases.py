@@ -42,6 +42,12 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
     "hydrostatic-2d": ("hydrostatic-2d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
     "hydrostatic-3d": ("hydrostatic-3d", {"fluid.spacing": 0.01, "duration": 0.1, "fps": 20.0}),
     "tank-3d": ("tank-3d", {"fluid.spacing": 0.025, "duration": 0.04, "fps": 50.0}),
+    # A box in the tank, the column against the far wall, height and pressure probes: the
+    # coarsest spacing that divides the tank and leaves the box 2 spacings thick.
+    "spheric-test2": (
+        "spheric-test2",
+        {"fluid.spacing": 0.161 / 2, "fluid.tank_height": 0.7, "duration": 0.05, "fps": 40.0},
+    ),
     "moon-jelly": ("moon-jelly", _MOON_SHORT),
     # The bell alone: the preset's tentacles as one table (its oral arms dropped), none of them.
     "moon-jelly-no-tentacles": (one_table("moon-jelly"), {**_MOON_SHORT, "tentacles.count": 0}),

@@ -23,7 +23,19 @@ from jellysim.errors import InputError
 from jellysim.species import preset_names
 
 REPO = Path(__file__).resolve().parents[2]
-KINDS = {"float", "int", "str", "choice", "vec3", "direction", "bool", "color", "angles"}
+KINDS = {
+    "float",
+    "int",
+    "str",
+    "choice",
+    "vec3",
+    "direction",
+    "bool",
+    "color",
+    "angles",
+    "boxes",
+    "points",
+}
 
 
 def _value_fields() -> list[tuple[str, dataclasses.Field[object]]]:

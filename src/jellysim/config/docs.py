@@ -45,6 +45,8 @@ key takes its default.
 
 
 def _default(f: dataclasses.Field[Any]) -> str:
+    if f.metadata.get("kind") == "points":
+        return "none"
     if f.default is not dataclasses.MISSING:
         value = f.default
     else:

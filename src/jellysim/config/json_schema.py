@@ -50,6 +50,16 @@ def value_schema(meta: dict[str, Any]) -> dict[str, Any]:
     if kind == "angles":
         degrees = {"type": "number", "minimum": -360.0, "maximum": 360.0}
         return {"type": "array", "items": degrees, "minItems": 1, "maxItems": 100_000}
+    if kind == "boxes":
+        return {"type": "array", "items": _vector(6, NUMBER), "maxItems": 1000}
+    if kind == "points":
+        point = {"type": "array", "items": NUMBER, "minItems": 1, "maxItems": 3}
+        return {
+            "type": "object",
+            "propertyNames": {"pattern": "^[A-Za-z0-9_-]{1,64}$"},
+            "additionalProperties": point,
+            "maxProperties": 1000,
+        }
     return {"type": "integer" if kind == "int" else "number", **_bounds(meta)}
 
 
@@ -61,7 +71,9 @@ def _key_schema(f: dataclasses.Field[Any]) -> dict[str, Any]:
     default = f.default if f.default is not dataclasses.MISSING else None
     if f.default_factory is not dataclasses.MISSING:
         default = f.default_factory()
-    if default is not None:  # unset in TOML: the key is left out
+    if meta["kind"] == "points":
+        schema["default"] = {}
+    elif default is not None:  # unset in TOML: the key is left out
         schema["default"] = list(default) if isinstance(default, tuple) else default
     return schema
 

@@ -94,6 +94,10 @@ def allowed(meta: Mapping[str, Any]) -> str:
         return "true or false"
     if kind == "angles":
         return "a non-empty list of finite numbers in [-360, 360] (degrees)"
+    if kind == "boxes":
+        return "a list of boxes [x0, y0, z0, x1, y1, z1] (finite, x0 < x1, y0 < y1, z0 < z1)"
+    if kind == "points":
+        return "a table of NAME = [x, ...] (1 to 3 finite numbers; NAME of letters, digits, _ -)"
     noun = "an integer" if kind == "int" else "a finite number"
     bounds = [
         f"{op} {meta[key]:g}"
@@ -138,6 +142,10 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
         ):
             raise bad()
         return tuple(float(c) for c in value)
+    if kind == "boxes":
+        return _boxes(value, bad)
+    if kind == "points":
+        return _points(value, bad)
     if kind == "color":
         if isinstance(value, str) and re.fullmatch(r"#[0-9A-Fa-f]{6}", value):
             # "#rrggbb" is sRGB-encoded, as everywhere (CSS, colour pickers); colours are
@@ -190,6 +198,40 @@ def _check_value(key: str, value: Any, meta: Mapping[str, Any]) -> Any:
     ):
         raise bad()
     return value if kind == "int" else float(number)
+
+
+def _numbers(value: Any, lengths: range) -> bool:
+    """Whether ``value`` is a list of finite numbers (not booleans) of one of ``lengths``."""
+    return (
+        isinstance(value, (list, tuple))
+        and len(value) in lengths
+        and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in value)
+        and all(math.isfinite(c) for c in value)
+    )
+
+
+def _boxes(value: Any, bad: Any) -> tuple[tuple[float, ...], ...]:
+    """Boxes [x0, y0, z0, x1, y1, z1] with lower < upper corners, as tuples of floats."""
+    if not isinstance(value, (list, tuple)) or len(value) > 1000:
+        raise bad()
+    boxes = []
+    for box in value:
+        if not _numbers(box, range(6, 7)) or not all(box[k] < box[k + 3] for k in range(3)):
+            raise bad()
+        boxes.append(tuple(float(c) for c in box))
+    return tuple(boxes)
+
+
+def _points(value: Any, bad: Any) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """Named points NAME = [x, ...] as (name, coordinates) pairs in the table's order."""
+    if not isinstance(value, Mapping) or len(value) > 1000:
+        raise bad()
+    points = []
+    for name, point in value.items():
+        if not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", name) or not _numbers(point, range(1, 4)):
+            raise bad()
+        points.append((name, tuple(float(c) for c in point)))
+    return tuple(points)
 
 
 def _build(cls: type, tree: Mapping[str, Any], prefix: str) -> Any:
@@ -460,6 +502,8 @@ def _check_fluid(scene: Scene) -> None:
             "fluid.lattice = 'fcc' is 3-D only: set fluid.dimensions = 3, or "
             "fluid.lattice = 'hexagonal' (its 2-D analogue) or 'square'"
         )
+    _check_obstacles(scene)
+    _check_probes(scene)
     lengths = ["tank_width", "tank_height", "water_height"]
     if f.geometry == "dam-break":
         lengths.append("water_width")
@@ -468,10 +512,14 @@ def _check_fluid(scene: Scene) -> None:
     for name in lengths:
         value = getattr(f, name)
         cells = value / f.spacing
-        if abs(cells - round(cells)) > 1e-6 * max(1.0, cells) or round(cells) < 2:
+        # On the fcc lattice only the tank's width need be whole: its rows and layers are not
+        # l0 apart, so depths and heights are cut at the sites inside (docs/decisions.md).
+        whole = f.lattice != "fcc" or name == "tank_width"
+        if (whole and abs(cells - round(cells)) > 1e-6 * max(1.0, cells)) or cells < 2 - 1e-6:
             raise InputError(
                 f"fluid.{name} = {_show(value)} is not a whole number (>= 2) of "
                 f"fluid.spacing = {_show(f.spacing)}: the tank and the water sit on its lattice"
+                + ("" if whole else " (on the fcc lattice: at least 2 spacings)")
             )
     if f.water_height > f.tank_height or (
         f.geometry == "dam-break" and f.water_width > f.tank_width
@@ -485,6 +533,104 @@ def _check_fluid(scene: Scene) -> None:
         count *= f.tank_depth / f.spacing
     if count > 20_000_000:
         raise InputError(f"fluid: about {count:.3g} lattice cells in the tank; at most 20,000,000")
+
+
+def _tank_box(scene: Scene) -> tuple[list[float], list[float]]:
+    """The tank's inner lower and upper corners (m), D coordinates, the last one up."""
+    f = scene.fluid
+    if f.dimensions == 3:
+        return [0.0, 0.0, 0.0], [f.tank_width, f.tank_depth, f.tank_height]
+    return [0.0, 0.0], [f.tank_width, f.tank_height]
+
+
+def _water_box(scene: Scene) -> tuple[list[float], list[float]]:
+    """The water's lower and upper corners (m) at the start."""
+    f = scene.fluid
+    lower, upper = _tank_box(scene)
+    upper[-1] = f.water_height
+    if f.geometry == "dam-break":
+        if f.water_side == "left":
+            upper[0] = f.water_width
+        else:
+            lower[0] = f.tank_width - f.water_width
+    return lower, upper
+
+
+def _check_obstacles(scene: Scene) -> None:
+    """Obstacles: 3-D, fluid-only, inside the tank, clear of the water, 2 spacings thick."""
+    f = scene.fluid
+    if not f.obstacles:
+        return
+    if f.dimensions != 3 or scene.bell.model != "none":
+        raise InputError(
+            "fluid.obstacles: solid boxes are for 3-D fluid-only scenes (fluid.dimensions = 3, "
+            "bell.model = 'none')"
+        )
+    tank_lower, tank_upper = _tank_box(scene)
+    water_lower, water_upper = _water_box(scene)
+    for k, box in enumerate(f.obstacles):
+        lower, upper = box[:3], box[3:]
+        key = f"fluid.obstacles[{k}] = {_show(box)}"
+        if any(lo < t - 1e-9 for lo, t in zip(lower, tank_lower, strict=True)) or any(
+            hi > t + 1e-9 for hi, t in zip(upper, tank_upper, strict=True)
+        ):
+            raise InputError(
+                f"{key} is not inside the tank: allowed 0 <= x <= {f.tank_width:g}, "
+                f"0 <= y <= {f.tank_depth:g}, 0 <= z <= {f.tank_height:g}"
+            )
+        if min(hi - lo for lo, hi in zip(lower, upper, strict=True)) < 2 * f.spacing - 1e-9:
+            raise InputError(
+                f"{key} is too thin: each side must be at least 2 fluid.spacing = "
+                f"{2 * f.spacing:g} m (walls and dummies inside)"
+            )
+        if all(
+            lo < w_hi and hi > w_lo
+            for lo, hi, w_lo, w_hi in zip(lower, upper, water_lower, water_upper, strict=True)
+        ):
+            raise InputError(f"{key} overlaps the water at the start: move it or the water")
+
+
+def _check_probes(scene: Scene) -> None:
+    """Height probes inside the tank; pressure probes on a face of the tank or an obstacle."""
+    f, probes = scene.fluid, scene.probes
+    if not (probes.height or probes.pressure):
+        return
+    if scene.bell.model != "none":
+        raise InputError("probes: for fluid-only scenes (bell.model = 'none')")
+    dim = f.dimensions
+    lower, upper = _tank_box(scene)
+    for name, point in probes.height:
+        key = f"probes.height.{name} = {_show(point)}"
+        if len(point) != dim - 1:
+            raise InputError(f"{key}: expected {dim - 1} coordinates (the line's horizontal place)")
+        if not all(lo < c < hi for c, lo, hi in zip(point, lower, upper[:-1], strict=False)):
+            raise InputError(f"{key} is not inside the tank")
+    for name, point in probes.pressure:
+        key = f"probes.pressure.{name} = {_show(point)}"
+        if len(point) != dim:
+            raise InputError(f"{key}: expected {dim} coordinates")
+        if wall_distance(scene, point) > 0.5 * f.spacing:
+            raise InputError(
+                f"{key} is not on a wall: it must lie within half a fluid.spacing of a face of "
+                "the tank (x = 0, x = tank_width, the side walls, the floor) or of an obstacle"
+            )
+
+
+def wall_distance(scene: Scene, point: tuple[float, ...]) -> float:
+    """How far (m) ``point`` lies from the nearest solid face: a wall or floor of the tank or a
+    face of an obstacle, from either side; inf outside the tank."""
+    lower, upper = _tank_box(scene)
+    if not all(lo - 1e-9 <= c <= hi + 1e-9 for c, lo, hi in zip(point, lower, upper, strict=True)):
+        return math.inf
+    # the tank's walls (not the open top)
+    faces = [c - lo for c, lo in zip(point, lower, strict=True)]
+    faces += [hi - c for c, hi in zip(point[:-1], upper[:-1], strict=True)]
+    distance = min(faces)
+    for box in scene.fluid.obstacles:
+        gaps = [max(box[k] - point[k], point[k] - box[k + 3]) for k in range(3)]
+        outside = math.sqrt(sum(max(g, 0.0) ** 2 for g in gaps))
+        distance = min(distance, outside if outside > 0 else -max(gaps))
+    return distance
 
 
 def parse_toml(text: str, source: str) -> Tree:
@@ -581,6 +727,13 @@ def apply_overrides(tree: Mapping[str, Any], overrides: Mapping[str, Any]) -> Tr
                     name = ".".join(parts[: depth + 1])
                     raise InputError(f"{name} must be a table [{name}], got {_show(node)}")
             else:
+                if f.metadata["kind"] == "points" and depth == len(parts) - 2:
+                    # probes.height.NAME = [x, y]: one named point, added or replaced
+                    points = node.setdefault(part, {})
+                    if not isinstance(points, dict):
+                        raise InputError(f"--set {dotted}: '{part}' is not a table of points")
+                    points[parts[-1]] = value
+                    break
                 if not last:
                     raise InputError(f"--set {dotted}: '{part}' is a value, not a table")
                 node[part] = value
@@ -630,10 +783,13 @@ def scene_to_tree(scene: Scene) -> Tree:
                 value = getattr(obj, f.name)
                 if value is None or f.metadata.get("internal"):
                     continue  # TOML has no null; an unset optional key stays unset
+                if f.metadata.get("kind") == "points":  # (name, point) pairs: a table
+                    out[f.name] = {name: list(point) for name, point in value}
+                    continue
                 out[f.name] = convert(value)
             return out
         if isinstance(obj, tuple):
-            return list(obj)
+            return [convert(item) for item in obj]
         return obj
 
     tree: Tree = convert(scene)

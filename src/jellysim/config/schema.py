@@ -527,6 +527,21 @@ class Fluid:
     water_height: float = param(
         0.2, unit="m", gt=0.0, le=1.0e3, doc="height of the water column or of the still water"
     )
+    water_side: str = param(
+        "left",
+        kind="choice",
+        choices=("left", "right"),
+        doc="dam-break: the column stands against the left (x = 0) or the right "
+        "(x = tank_width) wall",
+    )
+    obstacles: tuple[tuple[float, ...], ...] = param(
+        (),
+        unit="m",
+        kind="boxes",
+        doc="solid boxes in the tank (3-D), each [x0, y0, z0, x1, y1, z1] (lower and upper "
+        "corners): the lattice's sites inside a box are wall particles within one spacing "
+        'of its faces, dummies deeper (docs/fluid.md, "Obstacles and probes")',
+    )
     source: str = param(
         "standard",
         kind="choice",
@@ -626,6 +641,33 @@ class Fluid:
         1.0e-8, gt=0.0, lt=1.0, doc="relative residual at which the pressure solve stops"
     )
     courant: float = param(0.2, gt=0.0, le=1.0, doc="Courant number of the fluid's time step")
+
+
+@dataclass(frozen=True)
+class Probes:
+    height: tuple[tuple[str, tuple[float, ...]], ...] = param(
+        (),
+        unit="m",
+        kind="points",
+        doc="water-height probes, NAME = [x, y] (3-D) or [x] (2-D): vertical lines; each "
+        "frame the result's probes/height holds the water's depth along each line "
+        "(docs/theory/fluid.md F14)",
+    )
+    pressure: tuple[tuple[str, tuple[float, ...]], ...] = param(
+        (),
+        unit="m",
+        kind="points",
+        doc="pressure probes, NAME = [x, y, z] (3-D) or [x, y] (2-D), each on a face of the "
+        "tank or of an obstacle; the result's probes/pressure holds the wall pressure there, "
+        "averaged over each frame's steps (docs/theory/fluid.md F15)",
+    )
+    reference: str = param(
+        "none",
+        kind="choice",
+        choices=("none", "spheric-test2"),
+        doc="measurements that jellysim plot draws the probes against: 'spheric-test2', "
+        "Kleefsman et al. (2005)'s dam break with a box (SPHERIC benchmark Test 2)",
+    )
 
 
 @dataclass(frozen=True)
@@ -747,6 +789,7 @@ class Scene:
     bell: Bell = field(default_factory=Bell)
     root_motion: RootMotion = field(default_factory=RootMotion)
     fluid: Fluid = field(default_factory=Fluid)
+    probes: Probes = field(default_factory=Probes)
     look: Look = field(default_factory=Look)
     solver: Solver = field(default_factory=Solver)
     # The named groups [tentacles.NAME], in the scene's order; none: [tentacles] is the one group.
@@ -809,5 +852,6 @@ class Scene:
 SECTIONS: dict[str, type] = {
     f.name: f.type if isinstance(f.type, type) else globals()[str(f.type)]
     for f in dataclasses.fields(Scene)
-    if f.name in ("water", "flow", "tentacles", "bell", "root_motion", "fluid", "look", "solver")
+    if f.name
+    in ("water", "flow", "tentacles", "bell", "root_motion", "fluid", "probes", "look", "solver")
 }

@@ -55,12 +55,14 @@ def advance_to(
     stats: FrameStats,
     dt_limit: float = math.inf,
     external_force: ExternalForce | None = None,
+    after_step: Callable[[float], None] | None = None,
 ) -> None:
     """Step ``solver`` to the time ``end`` (s) in equal steps of at most its stable dt and
     ``dt_limit`` (s) (:func:`jellysim.fluid.mps.substep`), landing on ``end`` exactly; the frame's
     figures go into ``stats``. A diverged pressure solve, or a stable step so short that the
     rest of the frame would take more than :data:`MAX_STEPS_PER_FRAME` steps, raises
-    SimulationUnstable."""
+    SimulationUnstable. ``after_step`` (if given) is called with each step's dt (s) after it
+    (the probes' frame means)."""
     iterations, residual, steps = 0, 0.0, 0
     while solver.time < end - 1e-12 * frame_dt:
         limit = min(solver.stable_dt(), dt_limit)
@@ -83,6 +85,8 @@ def advance_to(
                 time=err.time,
             ) from None
         iterations, residual, steps = step.iterations, step.residual, steps + 1
+        if after_step is not None:
+            after_step(dt)
         for phase, seconds in step.seconds.items():
             stats.seconds[phase] = stats.seconds.get(phase, 0.0) + seconds
     solver.time = end  # the frame time exactly (steps land on it up to rounding)

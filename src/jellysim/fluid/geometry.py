@@ -145,6 +145,29 @@ def water_block(
     return (grid.astype(np.float64) + 0.5) * l0
 
 
+def box_obstacle(
+    lower: np.ndarray, upper: np.ndarray, l0: float, lattice: str = "square"
+) -> tuple[np.ndarray, np.ndarray]:
+    """A solid box in a 3-D tank: ``(positions (N, 3) m float64, kinds (N,) int8)``.
+
+    The lattice's sites inside the box ``[lower, upper]`` (corners in m, the sites a water block
+    of that box would take, :func:`water_block`): those less than ``l0`` inside its nearest
+    face are wall particles, the deeper ones dummies, as behind the tank's faces. A box standing
+    on the floor (``lower[2] <= 0``) has no wall layer along its bottom: the floor's walls are
+    there. Each side should be at least ``2 l0`` (the scene checks it).
+    """
+    lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    sites = water_block(
+        lower[0], upper[0], lower[1], upper[1], l0, max(lower[2], 0.0), upper[2], lattice
+    )
+    depths = np.concatenate([sites - lower, upper - sites], axis=1)
+    if lower[2] <= _TOLERANCE * l0:
+        depths[:, 2] = np.inf  # the bottom face lies on the floor
+    depth = depths.min(axis=1)
+    kinds = np.where(depth < l0 * (1.0 - _TOLERANCE), WALL, DUMMY).astype(np.int8)
+    return sites, kinds
+
+
 def filled_height(height: float, l0: float, lattice: str = "square") -> float:
     """The height (m) that a block from the floor to ``height`` fills on the lattice: its rows
     (those whose centres lie below ``height``) times the row spacing; on the square lattice

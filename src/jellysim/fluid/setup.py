@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from jellysim.config.schema import Scene
-from jellysim.fluid.geometry import FLUID, filled_height, tank, water_block
+from jellysim.fluid.geometry import FLUID, box_obstacle, filled_height, tank, water_block
 from jellysim.fluid.mps import MPSParameters, MPSSolver
 
 
@@ -28,19 +28,33 @@ def fluid_particles(scene: Scene) -> tuple[np.ndarray, np.ndarray, dict[str, flo
     )
     width = f.water_width if f.geometry == "dam-break" else f.tank_width
     height = filled_height(f.water_height, l0, f.lattice)
+    # the column against the left wall, or the right one (water_side)
+    start = 0.0 if f.geometry != "dam-break" or f.water_side == "left" else f.tank_width - width
     if dim == 2:
-        water = water_block(0.0, width, 0.0, f.water_height, l0, lattice=f.lattice)
+        water = water_block(start, start + width, 0.0, f.water_height, l0, lattice=f.lattice)
     else:
         water = water_block(
-            0.0, width, 0.0, f.tank_depth, l0, 0.0, f.water_height, lattice=f.lattice
+            start, start + width, 0.0, f.tank_depth, l0, 0.0, f.water_height, lattice=f.lattice
         )
-    positions = np.concatenate([water, walls])
-    all_kinds = np.concatenate([np.full(len(water), FLUID, dtype=np.int8), kinds])
+    solids = [(walls, kinds)]
+    for box in f.obstacles:  # solid boxes, clear of the water (checked by the scene)
+        solids.append(box_obstacle(np.array(box[:3]), np.array(box[3:]), l0, f.lattice))
+    positions = np.concatenate([water, *(p for p, _ in solids)])
+    all_kinds = np.concatenate([np.full(len(water), FLUID, dtype=np.int8), *(k for _, k in solids)])
     if f.geometry == "dam-break":
         attributes = {"column_width": width, "column_height": height}
     else:
         attributes = {"water_depth": height}
     return positions, all_kinds, attributes
+
+
+def tank_corner(scene: Scene) -> np.ndarray:
+    """The tank's inner upper corner (D,) m: its width, (depth,) and height; the inner lower
+    corner is the origin."""
+    f = scene.fluid
+    if f.dimensions == 3:
+        return np.array([f.tank_width, f.tank_depth, f.tank_height])
+    return np.array([f.tank_width, f.tank_height])
 
 
 def mps_parameters(scene: Scene) -> MPSParameters:

@@ -408,6 +408,55 @@ def thrust_plot(result: Result, path: Path) -> Path:
     return path
 
 
+# The probes that published comparisons of SPHERIC Test 2 draw (Issa & Violeau 2006, Figs. 4-5).
+SPHERIC_TEST2_PANELS = ("H2", "H4", "P1", "P3", "P5", "P7")
+
+
+def probes_plot(result: Result, path: Path) -> Path:
+    """The probes against time: with ``probes.reference = "spheric-test2"`` H2, H4, P1, P3, P5
+    and P7 (those the result has) against Kleefsman et al. (2005)'s measurements, otherwise
+    every probe, heights then pressures."""
+    plt = _pyplot()
+    t = result.time
+    series = result.probes()
+    measured = None
+    if result.scene.probes.reference == "spheric-test2":
+        from jellysim.reference import spheric_test2
+
+        measured = spheric_test2()
+        panels = [name for name in SPHERIC_TEST2_PANELS if name in series] or list(series)
+    else:
+        panels = list(series)
+    panels = panels[:12]
+    columns = 2 if len(panels) > 1 else 1
+    rows = -(-len(panels) // columns)
+    fig, axes = plt.subplots(
+        rows, columns, figsize=(6.0 * columns, 2.6 * rows), dpi=110, squeeze=False
+    )
+    for ax, name in zip(axes.ravel(), panels, strict=False):
+        values, unit = series[name]
+        scale, label = (1e-3, "kPa") if unit == "Pa" else (1.0, "m")
+        if measured is not None and name in measured:
+            ax.plot(measured["t"], measured[name] * scale, color="0.55", lw=0.9,
+                    label="experiment (Kleefsman et al. 2005)")  # fmt: skip
+        ax.plot(t, values * scale, color="tab:blue", lw=1.3, label="jellysim (MPS)")
+        ax.set_title(name, fontsize=10, loc="left")
+        ax.set_ylabel(label)
+        ax.set_xlim(0, float(t[-1]) if len(t) > 1 else 1.0)
+        ax.grid(alpha=0.3)
+    for ax in axes.ravel()[len(panels) :]:
+        ax.set_visible(False)
+    for ax in axes.ravel()[max(0, len(panels) - columns) : len(panels)]:
+        ax.set_xlabel("t (s)")  # the lowest panel of each column
+    axes[0, 0].legend(loc="best", fontsize=8)
+    l0 = float(result.file.attrs.get("particle_spacing", 0.0))
+    fig.suptitle(f"{result.scene.name}: probes (l0 = {l0:g} m)", fontsize=11)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
     """Write every figure that applies to ``result`` into ``folder`` (default DIR/plots)."""
     folder = folder or result.folder / "plots"
@@ -426,8 +475,16 @@ def plot_result(result: Result, folder: Path | None = None) -> list[Path]:
         and result.time[-1] >= result.scene.bell.period
     ):
         paths.append(jetting_and_relaxation(result, folder / "jetting_and_relaxation.png"))
-    if result.has(fields.FLUID_POSITION) and "column_width" in result.file.attrs:
+    if (
+        result.has(fields.FLUID_POSITION)
+        and "column_width" in result.file.attrs
+        # Martin & Moyce's column: against the left wall, the floor free
+        and result.scene.fluid.water_side == "left"
+        and not result.scene.fluid.obstacles
+    ):
         paths.append(surge_front_plot(result, folder / "surge_front.png"))
+    if result.has(fields.PROBE_HEIGHT) or result.has(fields.PROBE_PRESSURE):
+        paths.append(probes_plot(result, folder / "probes.png"))
     if (
         result.has(fields.FLUID_POSITION)
         and "water_depth" in result.file.attrs

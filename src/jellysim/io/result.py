@@ -76,6 +76,8 @@ DIMENSIONS = {
     "S": "spring",
     "N": "fluid_particle",
     "D": "dimension",
+    "H": "height_probe",
+    "K": "pressure_probe",
 }
 
 
@@ -259,6 +261,8 @@ class ResultWriter:
                     fletcher32=True,
                 )
                 ds.attrs["units"] = spec.units
+                for key, value in spec.attributes:
+                    ds.attrs[key] = value
             for name, (array, units) in (static or {}).items():
                 f.create_dataset(name, data=array, fletcher32=array.size > 0)
                 f[name].attrs["units"] = units
@@ -520,6 +524,7 @@ _WRITTEN_BY = {
     ),
     "fluid": "the fluid is written by MPS scenes and the mass-spring bell's tank",
     "solver": "the pressure solver's record is written by MPS scenes and the mass-spring bell",
+    "probes": "probes are written by fluid-only scenes with [probes] height or pressure",
 }
 
 
@@ -667,6 +672,20 @@ class Result:
             _, count, particles, _ = self.dataset(fields.TENTACLE_POSITION).shape
             return np.full(count, particles, dtype=np.int32)
         return self.read(fields.TENTACLE_PARTICLES)
+
+    def probes(self) -> dict[str, tuple[np.ndarray, str]]:
+        """Every probe's record by its name: ((F,) values, units), the height probes' in m,
+        then the pressure probes' in Pa (``probes/height``, ``probes/pressure``); empty for a
+        result without probes."""
+        out: dict[str, tuple[np.ndarray, str]] = {}
+        for field in (fields.PROBE_HEIGHT, fields.PROBE_PRESSURE):
+            if self.has(field):
+                names = np.atleast_1d(self.dataset(field).attrs["names"])
+                values = self.read(field)
+                for k, name in enumerate(names):
+                    key = name.decode() if isinstance(name, bytes) else str(name)
+                    out[key] = (values[:, k], field.units)
+        return out
 
     @property
     def tentacle_groups(self) -> list[str]:

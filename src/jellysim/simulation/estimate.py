@@ -200,6 +200,13 @@ def particle_counts(scene: Scene) -> Particles:
     tank = shell(WALL_LAYERS + DUMMY_LAYERS, f.tank_height)
     reach = mps_parameters(scene).neighbour_radius * l0
     wetted = shell(WALL_LAYERS, min(f.tank_height, f.water_height + reach))
+    for box in f.obstacles:  # solid boxes: walls within l0 of their faces (not a floor's)
+        sides = [box[k + 3] - box[k] for k in range(3)]
+        on_floor = box[2] <= 0.0
+        core = [max(sides[0] - 2 * l0, 0.0), max(sides[1] - 2 * l0, 0.0)]
+        core.append(max(sides[2] - (1 if on_floor else 2) * l0, 0.0))
+        walls += math.prod(sides) - math.prod(core)
+        tank += math.prod(sides)
     bell = 0.0
     if scene.bell.model == "mass-spring":  # the shell between two half-ellipsoids (Eq. B7)
         b = scene.bell
@@ -351,7 +358,15 @@ def planned_datasets(scene: Scene) -> tuple[list[Dataset], dict[str, int]]:
         return own + driver.frame_datasets(), _tentacle_static(scene) | static
     counts = particle_counts(scene)
     if name == "fluid":
-        return [fields.TIME.dataset(), *fluid_datasets(counts.total, counts.dim)], {
+        probes = [
+            field.dataset(**{axis: len(points)})
+            for field, axis, points in (
+                (fields.PROBE_HEIGHT, "H", scene.probes.height),
+                (fields.PROBE_PRESSURE, "K", scene.probes.pressure),
+            )
+            if points
+        ]
+        return [fields.TIME.dataset(), *fluid_datasets(counts.total, counts.dim), *probes], {
             fields.FLUID_KIND.path: counts.total
         }
     sectors = sector_count(root_layout(scene).margin_sectors(), 0)

@@ -7,6 +7,7 @@ advance_to`). The helpers here describe the fluid's datasets for this loop and t
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from typing import Any
 
@@ -18,7 +19,8 @@ from jellysim.fields import Dataset
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
 from jellysim.fluid.mps import MPSSolver
-from jellysim.fluid.setup import fluid_particles, make_solver, mps_parameters
+from jellysim.fluid.probes import HeightProbes, PressureProbes
+from jellysim.fluid.setup import fluid_particles, make_solver, mps_parameters, tank_corner
 from jellysim.simulation.loop import Simulation, register_loop
 
 log = logging.getLogger(__name__)
@@ -64,6 +66,58 @@ def report(solver: MPSSolver, stats: FrameStats) -> None:
         log.info("fluid time per phase: %s", parts)
 
 
+class Probes:
+    """A scene's height and pressure probes (:mod:`jellysim.fluid.probes`) on its solver, and
+    their datasets ``probes/height`` (F, H) m and ``probes/pressure`` (F, K) Pa, each with the
+    probes' ``names``."""
+
+    def __init__(self, scene: Scene, solver: MPSSolver) -> None:
+        p = scene.probes
+        self.solver = solver
+        self.height_names = [name for name, _ in p.height]
+        self.pressure_names = [name for name, _ in p.pressure]
+        dim, l0 = solver.params.dim, solver.params.l0
+        self.height = HeightProbes(
+            np.array([place for _, place in p.height]), l0, dim, scene.fluid.lattice
+        )
+        self.pressure = PressureProbes(
+            np.array([point for _, point in p.pressure]),
+            solver.position,
+            solver.kind,
+            l0,
+            tank_corner(scene),
+            np.array(scene.fluid.obstacles).reshape(-1, 2 * dim),
+        )
+        self.end_frame()  # frame 0 (or a restored frame): the pressure now
+
+    def after_step(self, dt: float) -> None:
+        self.pressure.add_step(self.solver.pressure, dt)
+
+    def end_frame(self) -> None:
+        """Close the frame's pressure means (called once a frame, after its steps)."""
+        self.frame_pressure = self.pressure.frame_mean(self.solver.pressure)
+
+    def frame_values(self) -> dict[str, np.ndarray]:
+        s = self.solver
+        values = {}
+        if self.height_names:
+            values[fields.PROBE_HEIGHT.path] = self.height.measure(s.position, s.kind, s.alive)
+        if self.pressure_names:
+            values[fields.PROBE_PRESSURE.path] = self.frame_pressure.copy()
+        return values
+
+    def datasets(self) -> list[Dataset]:
+        out = []
+        for field, names, axis in (
+            (fields.PROBE_HEIGHT, self.height_names, "H"),
+            (fields.PROBE_PRESSURE, self.pressure_names, "K"),
+        ):
+            if names:
+                spec = field.dataset(**{axis: len(names)})
+                out.append(dataclasses.replace(spec, attributes=(("names", names),)))
+        return out
+
+
 @register_loop("fluid")
 class FluidSimulation(Simulation):
     """One fluid-only scene: the solver (its state mutated in place) and the frame counter."""
@@ -73,6 +127,9 @@ class FluidSimulation(Simulation):
         positions, kinds, self.geometry = fluid_particles(scene)
         self.solver: Any = make_solver(mps_parameters(scene), positions, kinds, scene.fluid.device)
         self.stats = FrameStats()
+        self.probes = (
+            Probes(scene, self.solver) if scene.probes.height or scene.probes.pressure else None
+        )
 
     def describe(self) -> str:
         fluid = int(np.sum(self.solver.kind == FLUID))
@@ -90,16 +147,28 @@ class FluidSimulation(Simulation):
 
     def step_frame(self) -> None:
         """Advance the fluid to the next frame time; raise SimulationUnstable if it diverged."""
-        advance_to(self.solver, (self.frame + 1) * self.frame_dt, self.frame_dt, self.stats)
+        advance_to(
+            self.solver,
+            (self.frame + 1) * self.frame_dt,
+            self.frame_dt,
+            self.stats,
+            after_step=None if self.probes is None else self.probes.after_step,
+        )
+        if self.probes is not None:
+            self.probes.end_frame()
         self.frame += 1
         self.notify()
 
     def frame_values(self) -> dict[str, Any]:
-        return {fields.TIME.path: self.time, **fluid_values(self.solver, slice(None), self.stats)}
+        values = {fields.TIME.path: self.time, **fluid_values(self.solver, slice(None), self.stats)}
+        if self.probes is not None:
+            values.update(self.probes.frame_values())
+        return values
 
     def datasets(self) -> list[Dataset]:
         n, dim = self.solver.position.shape
-        return [fields.TIME.dataset(), *fluid_datasets(n, dim)]
+        probes = [] if self.probes is None else self.probes.datasets()
+        return [fields.TIME.dataset(), *fluid_datasets(n, dim), *probes]
 
     def static_datasets(self) -> dict[str, tuple[np.ndarray, str]]:
         return {fields.FLUID_KIND.path: (self.solver.kind, fields.FLUID_KIND.units)}
@@ -120,6 +189,8 @@ class FluidSimulation(Simulation):
         self.stats.restore(state.pop("last"))
         self.solver.restore(state)
         self.frame = frame
+        if self.probes is not None:
+            self.probes.end_frame()  # the restored frame's pressure, and no steps half-counted
 
     def finish(self) -> None:
         report(self.solver, self.stats)
