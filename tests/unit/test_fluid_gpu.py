@@ -70,10 +70,10 @@ def _pair(case: str) -> tuple[MPSSolver, gpu.GPUSolver, np.ndarray, int]:
 
 
 def _stirred(cpu: MPSSolver) -> dict[str, np.ndarray]:
-    """``cpu``'s state with the water stirred (viscosity at work from the first step) and the
-    top particle of the column's middle thrown down at 3 m/s onto the one below it, thrown up:
-    they close to within the collision distance in a step, and the top one, pushed into the
-    water, has n* >= beta n0 though it started on the surface (n^k < beta n0)."""
+    """``cpu``'s state (the 2-D column, hexagonal) with the water stirred (viscosity at work from
+    the first step), the top particle of the column's middle thrown down at 3 m/s onto the one
+    below it, thrown up (they close to within the collision distance in a step), and a surface
+    particle pushed into the water."""
     state = cpu.state_arrays()
     fluid = np.flatnonzero(cpu.kind == FLUID)
     rng = np.random.default_rng(3)
@@ -84,6 +84,11 @@ def _stirred(cpu: MPSSolver) -> dict[str, np.ndarray]:
     below = middle[np.argsort(state["position"][middle, -1])[-2]]
     state["velocity"][top, -1] = -3.0
     state["velocity"][below, -1] = 3.0
+    # a top-row particle near the column's right edge pushed down at 1 m/s: n* >= beta n0 at
+    # r* though n^k < beta n0 (found by trying the surface particles on the CPU path)
+    edge = fluid[np.argmin(np.linalg.norm(x - np.array([0.0325, 0.0563]), axis=1))]
+    assert np.linalg.norm(state["position"][edge] - [0.0325, 0.0563]) < 0.1 * L0
+    state["velocity"][edge, -1] = -1.0
     return state
 
 
