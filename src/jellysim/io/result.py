@@ -673,6 +673,18 @@ class Result:
             return np.full(count, particles, dtype=np.int32)
         return self.read(fields.TENTACLE_PARTICLES)
 
+    @property
+    def probe_heights(self) -> np.ndarray:
+        """(F, H) float64, m: the water depth along each height probe's line (``probes/height``;
+        the probes' names in :meth:`probes`)."""
+        return self.read(fields.PROBE_HEIGHT)
+
+    @property
+    def probe_pressures(self) -> np.ndarray:
+        """(F, K) float64, Pa: the wall pressure at each pressure probe, the frame's mean
+        (``probes/pressure``; the probes' names in :meth:`probes`)."""
+        return self.read(fields.PROBE_PRESSURE)
+
     def probes(self) -> dict[str, tuple[np.ndarray, str]]:
         """Every probe's record by its name: ((F,) values, units), the height probes' in m,
         then the pressure probes' in Pa (``probes/height``, ``probes/pressure``); empty for a
