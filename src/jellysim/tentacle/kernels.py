@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from jellysim.tentacle.contact import Obstacle, push_out
+from jellysim.tentacle.lanes import BAND, LANES, _band_ldlt_solve_lanes
 
 REYNOLDS_STOKES = 1.0  # below: Stokes drag 3 pi mu d u (Eq. T4, first branch)
 REYNOLDS_HOLD = 1.0e4  # above: the drag coefficient is held at its value here (Eq. T4)
@@ -75,7 +76,7 @@ class Medium(NamedTuple):
     tentacle_density: float  # rho_t, kg/m3
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def drag_coefficient(reynolds: float) -> float:
     """Sphere drag coefficient of the paper, Eq. (T4) [Hirato & Kawaguchi Eq. 4].
 
@@ -89,7 +90,7 @@ def drag_coefficient(reynolds: float) -> float:
     return root * root
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def drag_gain(speed: float, diameter: float, density: float, viscosity: float) -> float:
     """Gain k (kg/s) with drag force ``F = k u_r`` on a sphere, Eq. (T5).
 
@@ -103,7 +104,7 @@ def drag_gain(speed: float, diameter: float, density: float, viscosity: float) -
     return drag_coefficient(reynolds) * 0.5 * density * speed * area
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def slender_drag_gains(
     tangent: np.ndarray,
     relative: np.ndarray,
@@ -189,7 +190,7 @@ def _transport(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> tuple[float, floa
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _curl_frames(
     x: np.ndarray,
     clamp_direction: np.ndarray,
@@ -201,12 +202,18 @@ def _curl_frames(
 
     Fills ``work`` (6, P, 3): row 0 the unit tangents t_j of the segments j = 0..P-2, row 1 the
     transported normals n_j, row 2 at node i = 1..P-2 the rest second difference
-    ``g_i = F_{i-1} r_i`` (m), row 3 the second differences ``x_{i-1} - 2 x_i + x_{i+1}``, and
-    ``work[4, j, 0]`` the segment lengths.
+    ``g_i = F_{i-1} r_i`` (m), row 3 the second differences ``x_{i-1} - 2 x_i + x_{i+1}``,
+    ``work[4, j, 0]`` the segment lengths and ``work[4, j, 1]`` their inverses, and row 5 the
+    rotation vectors ``q_j = t_{j-1} x t_j / (1 + t_{j-1} . t_j)`` (t_{-1} the clamp direction).
+
+    The transport of Eq. (T11), ``n_j = cos n_{j-1} + c x n_{j-1} + (c . n_{j-1}) q_j`` with
+    ``c = t_{j-1} x t_j`` and ``cos = t_{j-1} . t_j``, is :func:`_transport` with its division
+    taken once per segment (into q_j), outside the recurrence from one normal to the next.
     """
     n_particles = x.shape[0]
     tangents = work[0]
     normals = work[1]
+    q = work[5]
     for j in range(n_particles - 1):
         length = 0.0
         for k in range(3):
@@ -214,14 +221,28 @@ def _curl_frames(
             tangents[j, k] = e
             length += e * e
         length = math.sqrt(length)
+        inverse = 1.0 / length
         work[4, j, 0] = length
+        work[4, j, 1] = inverse
         for k in range(3):
-            tangents[j, k] /= length
-    n0, n1, n2 = _transport(clamp_direction, tangents[0], curl_normal)
-    normals[0, 0], normals[0, 1], normals[0, 2] = n0, n1, n2
-    for j in range(1, n_particles - 1):
-        n0, n1, n2 = _transport(tangents[j - 1], tangents[j], normals[j - 1])
+            tangents[j, k] *= inverse
+    u0, u1, u2 = curl_normal[0], curl_normal[1], curl_normal[2]
+    for j in range(n_particles - 1):
+        a = clamp_direction if j == 0 else tangents[j - 1]
+        b = tangents[j]
+        c0 = a[1] * b[2] - a[2] * b[1]
+        c1 = a[2] * b[0] - a[0] * b[2]
+        c2 = a[0] * b[1] - a[1] * b[0]
+        cos = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+        inverse = 1.0 / (1.0 + cos)
+        q0, q1, q2 = c0 * inverse, c1 * inverse, c2 * inverse
+        q[j, 0], q[j, 1], q[j, 2] = q0, q1, q2
+        w = c0 * u0 + c1 * u1 + c2 * u2
+        n0 = cos * u0 + c1 * u2 - c2 * u1 + w * q0
+        n1 = cos * u1 + c2 * u0 - c0 * u2 + w * q1
+        n2 = cos * u2 + c0 * u1 - c1 * u0 + w * q2
         normals[j, 0], normals[j, 1], normals[j, 2] = n0, n1, n2
+        u0, u1, u2 = n0, n1, n2
     for i in range(1, n_particles - 1):
         t = tangents[i - 1]
         n = normals[i - 1]
@@ -262,7 +283,7 @@ def curl_energy(
     return energy
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def curl_forces(
     x: np.ndarray,
     c: float,
@@ -289,8 +310,8 @@ def curl_forces(
     _curl_frames(x, clamp_direction, curl_normal, rest, work)
     tangents = work[0]
     g = work[2]
-    torque = work[1]  # the normals are not needed any more: tau_j (row 1), q_j (row 3)
-    q = work[3]
+    torque = work[1]  # the normals are not needed any more: tau_j (row 1)
+    q = work[5]  # q_j, from _curl_frames
     quarter = 0.25 * c
     out[:] = 0.0
     for i in range(1, n_particles - 1):
@@ -311,16 +332,6 @@ def curl_forces(
             torque[j, 0] = 0.0
             torque[j, 1] = 0.0
             torque[j, 2] = 0.0
-    for j in range(n_segments):
-        a = clamp_direction if j == 0 else tangents[j - 1]
-        b = tangents[j]
-        c0 = a[1] * b[2] - a[2] * b[1]
-        c1 = a[2] * b[0] - a[0] * b[2]
-        c2 = a[0] * b[1] - a[1] * b[0]
-        denominator = 1.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-        q[j, 0] = c0 / denominator
-        q[j, 1] = c1 / denominator
-        q[j, 2] = c2 / denominator
     suffix = 0.0  # S_{j+1}
     for j in range(n_segments - 1, -1, -1):
         t = tangents[j]
@@ -335,7 +346,7 @@ def curl_forces(
             a1 -= later * q[j + 1, 1]
             a2 -= later * q[j + 1, 2]
         along = a0 * t[0] + a1 * t[1] + a2 * t[2]
-        scale = quarter / work[4, j, 0]
+        scale = quarter * work[4, j, 1]
         f0 = scale * (a0 - along * t[0])
         f1 = scale * (a1 - along * t[1])
         f2 = scale * (a2 - along * t[2])
@@ -383,6 +394,7 @@ def rest_shape_positions(
 KKT_BLOCK = 4  # unknowns per particle in the saddle-point system: x, y, z and one multiplier
 KKT_HALF_BANDWIDTH = 8  # x_i couples to the same component of x_{i+2}: 2 blocks
 KKT_PADDING = KKT_HALF_BANDWIDTH  # zero rows before and after a system in its band storage
+assert BAND == KKT_HALF_BANDWIDTH  # the lanes' solve (lanes.py) is compiled for this band
 
 
 # fastmath limited to contraction (fused multiply-adds): no reassociation, so the order of every
@@ -450,7 +462,7 @@ def _band_ldlt_solve(band: np.ndarray, inverse_pivots: np.ndarray, rhs: np.ndarr
         rhs[i] = s
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def project_lengths(
     x: np.ndarray,
     inverse_mass: np.ndarray,
@@ -663,7 +675,7 @@ PROJECTION_TOLERANCE = 1.0e-10  # relative segment-length error after every step
 PROJECTION_MAX_ITERATIONS = 50
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _assemble_slender_particle(
     band: np.ndarray,
     rhs: np.ndarray,
@@ -744,7 +756,7 @@ def _assemble_slender_particle(
     return k_n, k_t
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_drag_impulse(
     impulse: np.ndarray,
     gains: np.ndarray,
@@ -778,7 +790,7 @@ def _add_drag_impulse(
             impulse[i, 2] += dt * k * w2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _assemble_constraint(
     band: np.ndarray,
     rhs: np.ndarray,
@@ -952,6 +964,7 @@ def advance_frame(
     n_free = n_particles - first
     n_segments = n_particles - 1
     n_unknowns = KKT_BLOCK * n_free
+    n_rows = n_unknowns + 2 * KKT_PADDING
     n_substeps = root_positions.shape[0]
     c = model.bending_stiffness
     d = model.spacing
@@ -960,174 +973,222 @@ def advance_frame(
     flow_last = flow.shape[2] - 1  # 0: one water velocity per chain; P - 1: one per particle
     record = drag_impulse.shape[1] > 0
     contact = obstacle.faces.shape[0] > 0
-    for t in prange(n_chains):
-        x = positions[t]
-        v = velocities[t]
-        # The system in rows KKT_PADDING.. of zero-padded storage (_band_ldlt_solve).
-        padded_band = np.empty((n_unknowns + 2 * KKT_PADDING, KKT_HALF_BANDWIDTH + 1))
-        inverse_pivots = np.empty(n_unknowns + 2 * KKT_PADDING)
-        padded_rhs = np.zeros(n_unknowns + 2 * KKT_PADDING)
-        band = padded_band[KKT_PADDING : KKT_PADDING + n_unknowns]
-        rhs = padded_rhs[KKT_PADDING : KKT_PADDING + n_unknowns]
-        old = np.empty((n_particles, 3))
+    n_batches = (n_chains + LANES - 1) // LANES
+    # LANES chains at a time, each substep's systems solved together, one chain in each lane of
+    # a vector register (lanes.py); a chain's arithmetic is that of a chain solved alone.
+    for batch in prange(n_batches):
+        first_chain = batch * LANES
+        lanes = min(LANES, n_chains - first_chain)
+        # The systems in rows KKT_PADDING.. of zero-padded storage, lane l holding chain
+        # first_chain + l (_band_ldlt_solve, band_ldlt_solve_lanes).
+        lane_band = np.empty((n_rows, KKT_HALF_BANDWIDTH + 1, LANES))
+        lane_pivots = np.empty((n_rows, LANES))
+        lane_rhs = np.zeros((n_rows, LANES))
+        olds = np.empty((LANES, n_particles, 3))
         edges = np.empty((n_segments, 3))
         work = np.empty((4, n_segments))
-        curled = False
-        for i in range(n_particles):
-            for k in range(3):
-                if rest_second_differences[t, i, k] != 0.0:
-                    curled = True
-        rest_force = np.zeros((n_particles, 3))
-        curl_work = np.empty((6, n_particles, 3)) if curled else np.empty((6, 0, 3))
+        curled = np.zeros(LANES, dtype=np.bool_)
+        for lane in range(lanes):
+            for i in range(n_particles):
+                for k in range(3):
+                    if rest_second_differences[first_chain + lane, i, k] != 0.0:
+                        curled[lane] = True
+        any_curled = curled.any()
+        rest_forces = np.zeros((LANES, n_particles, 3))
+        curl_work = np.empty((6, n_particles, 3)) if any_curled else np.empty((6, 0, 3))
         slender_work = np.empty((2, 3))
-        # Per particle, the step's drag gains: k (sphere) or k_n, k_t and the tangent (slender).
-        gains = np.zeros((n_particles if record else 0, 5))
-        # The contact's work space (Eq. T15-T17).
+        # Per lane and particle, the step's drag gains: k (sphere) or k_n, k_t and the tangent
+        # (slender).
+        lane_gains = np.zeros((LANES, n_particles if record else 0, 5))
+        # The contact's work space (Eq. T15-T17), per lane as each chain had its own.
         n_contact = n_particles if contact else 0
-        pinned = np.zeros(n_contact, dtype=np.bool_)
-        held = np.empty(n_contact)
-        moved = np.zeros(n_contact, dtype=np.bool_)
-        contact_scratch = np.empty((11, 3))
-        walls = np.zeros((4, n_contact, 3))
-        wall_band = np.empty((max(2 * n_contact - 1, 0), 3))
-        wall_rhs = np.empty(max(2 * n_contact - 1, 0))
-        worst_error = 0.0
-        most_iterations = 0
-        failed_at = -1
+        pinned = np.zeros((LANES, n_contact), dtype=np.bool_)
+        held = np.empty((LANES, n_contact))
+        moved = np.zeros((LANES, n_contact), dtype=np.bool_)
+        contact_scratch = np.empty((LANES, 11, 3))
+        walls = np.zeros((LANES, 4, n_contact, 3))
+        wall_band = np.empty((LANES, max(2 * n_contact - 1, 0), 3))
+        wall_rhs = np.empty((LANES, max(2 * n_contact - 1, 0)))
+        worst_errors = np.zeros(LANES)
+        most_iterations = np.zeros(LANES, dtype=np.int64)
+        failed_at = np.full(LANES, -1, dtype=np.int64)
+        running = np.zeros(LANES, dtype=np.bool_)  # a chain in the lane, not failed
+        running[:lanes] = True
+        solving = np.zeros(LANES, dtype=np.bool_)  # lanes whose chain (re)solves its system
         for s in range(n_substeps):
-            r = root_positions[s, t]
-            tdir = root_directions[s, t]
-            old[:] = x
-            if curled:
-                # The rest shape's force at the start of the step, Eq. (T13).
-                curl_forces(
-                    old,
-                    c,
-                    tdir,
-                    curl_normals[s, t],
-                    rest_second_differences[t],
-                    curl_work,
-                    rest_force,
-                )
+            for lane in range(lanes):
+                if not running[lane]:
+                    continue
+                t = first_chain + lane
+                olds[lane] = positions[t]
+                if curled[lane]:
+                    # The rest shape's force at the start of the step, Eq. (T13).
+                    curl_forces(
+                        olds[lane],
+                        c,
+                        root_directions[s, t],
+                        curl_normals[s, t],
+                        rest_second_differences[t],
+                        curl_work,
+                        rest_forces[lane],
+                    )
+            solving[:] = running
             # Sequential linearisation: re-solve with the segment directions of the new iterate
             # while a segment rotates so far in one step that its length is off by > 1e-3.
             for _linearisation in range(MAX_LINEARISATIONS):
-                padded_band[:] = 0.0
-                # Assemble the saddle-point system, Eq. (T7); particle i is block q = i - first.
-                for q in range(n_free):
-                    i = q + first
-                    row = KKT_BLOCK * q
-                    u = flow[s, t, min(i, flow_last)]
-                    rel0 = u[0] - v[i, 0]
-                    rel1 = u[1] - v[i, 1]
-                    rel2 = u[2] - v[i, 2]
-                    if slender:
-                        k_n, k_t = _assemble_slender_particle(
-                            band, rhs, row, i, q, old, v, u, model, medium, dt, dt2c,
-                            n_particles, slender_work,
-                        )  # fmt: skip
-                        if record:
-                            gains[i, 0] = k_n
-                            gains[i, 1] = k_t
-                            for k in range(3):
-                                gains[i, 2 + k] = slender_work[0, k]
-                        if curled:
-                            for k in range(3):
-                                rhs[row + k] += dt * dt * rest_force[i, k]
-                        _assemble_constraint(band, rhs, row, i, first, x, r, d)
-                        continue
-                    k_drag = drag_gain(
-                        math.sqrt(rel0 * rel0 + rel1 * rel1 + rel2 * rel2),
-                        d,
-                        medium.density,
-                        medium.viscosity,
-                    )
-                    if record:
-                        gains[i, 0] = k_drag
-                    m = model.mass[i]
-                    buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
-                    diagonal = m + dt * k_drag + dt2c * model.stiffness_diag[q]
-                    for k in range(3):
-                        band[row + k, 0] = diagonal
-                        if q >= 1:
-                            band[row + k, KKT_BLOCK] = dt2c * model.stiffness_off1[q - 1]
-                        if q >= 2:
-                            band[row + k, 2 * KKT_BLOCK] = dt2c * model.stiffness_off2[q - 2]
-                        rhs[row + k] = (
-                            m * (old[i, k] + dt * v[i, k])
-                            + dt * k_drag * old[i, k]
-                            + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
-                        )
-                        if curled:
-                            rhs[row + k] += dt * dt * rest_force[i, k]
-                    # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its direction.
-                    _assemble_constraint(band, rhs, row, i, first, x, r, d)
-                if first == 1:
-                    # The prescribed root enters through the bending coupling, Eq. (T7).
-                    for k in range(3):
-                        rhs[k] -= dt2c * model.root_coupling[0] * r[k]
-                        if n_free > 1:
-                            rhs[KKT_BLOCK + k] -= dt2c * model.root_coupling[1] * r[k]
-                    if model.clamped:
-                        # The clamp's part along t: -(c/2) t t^T on particle 1, Eq. (T3).
-                        along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
-                        for k in range(3):
-                            rhs[k] -= 0.5 * dt2c * along * tdir[k]
-                            for kk in range(k + 1):
-                                band[k, k - kk] -= 0.5 * dt2c * tdir[k] * tdir[kk]
-                _band_ldlt_solve(padded_band, inverse_pivots, padded_rhs)
-                if first == 1:
-                    for k in range(3):
-                        x[0, k] = r[k]
-                for q in range(n_free):
-                    for k in range(3):
-                        x[q + first, k] = rhs[KKT_BLOCK * q + k]
-                worst = 0.0
-                for j in range(n_segments):
-                    e0 = x[j + 1, 0] - x[j, 0]
-                    e1 = x[j + 1, 1] - x[j, 1]
-                    e2 = x[j + 1, 2] - x[j, 2]
-                    worst = max(worst, abs(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / d - 1.0))
-                if worst < RELINEARISE_ABOVE:
+                if not solving.any():
                     break
-            if record:
-                # The drag of the solved step, whose momentum balance the projection below keeps
-                # (it moves particles by mass-weighted, momentum-free corrections).
-                _add_drag_impulse(drag_impulse[t], gains, flow[s, t], x, old, first, slender, dt)
-            # Exact inextensibility, Eq. (T8).
-            iterations = project_lengths(
-                x,
-                model.inverse_mass,
-                d,
-                PROJECTION_TOLERANCE,
-                PROJECTION_MAX_ITERATIONS,
-                edges,
-                work,
-            )
-            if iterations >= 0 and contact:
-                # Out of the bell's tissue, Eq. (T15-T17): the velocity below carries the wall's.
-                iterations = _keep_out(
-                    x, old, first, obstacle, (s + 1.0) / n_substeps, model.inverse_mass, d,
-                    iterations, edges, work, pinned, held, moved, contact_scratch, walls,
-                    wall_band, wall_rhs,
-                )  # fmt: skip
-            # Velocities from the displacement, Eq. (T9).
-            if first == 1:
-                for k in range(3):
-                    v[0, k] = root_velocities[s, t, k]
-            finite = True
-            for i in range(first, n_particles):
-                for k in range(3):
-                    v[i, k] = (x[i, k] - old[i, k]) / dt
-                    if not math.isfinite(v[i, k]):
-                        finite = False
-            if iterations < 0 or not finite:
-                failed_at = s
-                break
-            most_iterations = max(most_iterations, iterations)
-            for j in range(n_segments):
-                length = math.sqrt(edges[j, 0] ** 2 + edges[j, 1] ** 2 + edges[j, 2] ** 2)
-                worst_error = max(worst_error, abs(length / d - 1.0))
-        diagnostics[t, 0] = worst_error
-        diagnostics[t, 1] = most_iterations
-        diagnostics[t, 2] = failed_at
+                lane_band[:] = 0.0
+                for lane in range(LANES):
+                    band = lane_band[KKT_PADDING : KKT_PADDING + n_unknowns, :, lane]
+                    rhs = lane_rhs[KKT_PADDING : KKT_PADDING + n_unknowns, lane]
+                    if not solving[lane]:
+                        # A system of its own for an idle lane, so that it stays finite.
+                        band[:, 0] = 1.0
+                        rhs[:] = 0.0
+                        continue
+                    t = first_chain + lane
+                    x = positions[t]
+                    v = velocities[t]
+                    old = olds[lane]
+                    gains = lane_gains[lane]
+                    rest_force = rest_forces[lane]
+                    r = root_positions[s, t]
+                    tdir = root_directions[s, t]
+                    # Assemble the saddle-point system, Eq. (T7); particle i is block q = i - first.
+                    for q in range(n_free):
+                        i = q + first
+                        row = KKT_BLOCK * q
+                        u = flow[s, t, min(i, flow_last)]
+                        rel0 = u[0] - v[i, 0]
+                        rel1 = u[1] - v[i, 1]
+                        rel2 = u[2] - v[i, 2]
+                        if slender:
+                            k_n, k_t = _assemble_slender_particle(
+                                band, rhs, row, i, q, old, v, u, model, medium, dt, dt2c,
+                                n_particles, slender_work,
+                            )  # fmt: skip
+                            if record:
+                                gains[i, 0] = k_n
+                                gains[i, 1] = k_t
+                                for k in range(3):
+                                    gains[i, 2 + k] = slender_work[0, k]
+                            if curled[lane]:
+                                for k in range(3):
+                                    rhs[row + k] += dt * dt * rest_force[i, k]
+                            _assemble_constraint(band, rhs, row, i, first, x, r, d)
+                            continue
+                        k_drag = drag_gain(
+                            math.sqrt(rel0 * rel0 + rel1 * rel1 + rel2 * rel2),
+                            d,
+                            medium.density,
+                            medium.viscosity,
+                        )
+                        if record:
+                            gains[i, 0] = k_drag
+                        m = model.mass[i]
+                        buoyant = (medium.tentacle_density - medium.density) * model.volume[i]
+                        diagonal = m + dt * k_drag + dt2c * model.stiffness_diag[q]
+                        for k in range(3):
+                            band[row + k, 0] = diagonal
+                            if q >= 1:
+                                band[row + k, KKT_BLOCK] = dt2c * model.stiffness_off1[q - 1]
+                            if q >= 2:
+                                band[row + k, 2 * KKT_BLOCK] = dt2c * model.stiffness_off2[q - 2]
+                            rhs[row + k] = (
+                                m * (old[i, k] + dt * v[i, k])
+                                + dt * k_drag * old[i, k]
+                                + dt * dt * (buoyant * medium.gravity[k] + k_drag * u[k])
+                            )
+                            if curled[lane]:
+                                rhs[row + k] += dt * dt * rest_force[i, k]
+                        # The multiplier of segment (i-1, i): n . (x_i - x_{i-1}) = d, n its
+                        # direction.
+                        _assemble_constraint(band, rhs, row, i, first, x, r, d)
+                    if first == 1:
+                        # The prescribed root enters through the bending coupling, Eq. (T7).
+                        for k in range(3):
+                            rhs[k] -= dt2c * model.root_coupling[0] * r[k]
+                            if n_free > 1:
+                                rhs[KKT_BLOCK + k] -= dt2c * model.root_coupling[1] * r[k]
+                        if model.clamped:
+                            # The clamp's part along t: -(c/2) t t^T on particle 1, Eq. (T3).
+                            along = r[0] * tdir[0] + r[1] * tdir[1] + r[2] * tdir[2]
+                            for k in range(3):
+                                rhs[k] -= 0.5 * dt2c * along * tdir[k]
+                                for kk in range(k + 1):
+                                    band[k, k - kk] -= 0.5 * dt2c * tdir[k] * tdir[kk]
+                _band_ldlt_solve_lanes(lane_band, lane_pivots, lane_rhs)  # type: ignore[call-arg]
+                for lane in range(lanes):
+                    if not solving[lane]:
+                        continue
+                    t = first_chain + lane
+                    x = positions[t]
+                    if first == 1:
+                        for k in range(3):
+                            x[0, k] = root_positions[s, t, k]
+                    for q in range(n_free):
+                        for k in range(3):
+                            x[q + first, k] = lane_rhs[KKT_PADDING + KKT_BLOCK * q + k, lane]
+                    worst = 0.0
+                    for j in range(n_segments):
+                        e0 = x[j + 1, 0] - x[j, 0]
+                        e1 = x[j + 1, 1] - x[j, 1]
+                        e2 = x[j + 1, 2] - x[j, 2]
+                        worst = max(worst, abs(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) / d - 1.0))
+                    if worst < RELINEARISE_ABOVE:
+                        solving[lane] = False
+            for lane in range(lanes):
+                if not running[lane]:
+                    continue
+                t = first_chain + lane
+                x = positions[t]
+                v = velocities[t]
+                old = olds[lane]
+                if record:
+                    # The drag of the solved step, whose momentum balance the projection below
+                    # keeps (it moves particles by mass-weighted, momentum-free corrections).
+                    _add_drag_impulse(
+                        drag_impulse[t], lane_gains[lane], flow[s, t], x, old, first, slender, dt
+                    )
+                # Exact inextensibility, Eq. (T8).
+                iterations = project_lengths(
+                    x,
+                    model.inverse_mass,
+                    d,
+                    PROJECTION_TOLERANCE,
+                    PROJECTION_MAX_ITERATIONS,
+                    edges,
+                    work,
+                )
+                if iterations >= 0 and contact:
+                    # Out of the bell's tissue, Eq. (T15-T17): the velocity below carries the
+                    # wall's.
+                    iterations = _keep_out(
+                        x, old, first, obstacle, (s + 1.0) / n_substeps, model.inverse_mass, d,
+                        iterations, edges, work, pinned[lane], held[lane], moved[lane],
+                        contact_scratch[lane], walls[lane], wall_band[lane], wall_rhs[lane],
+                    )  # fmt: skip
+                # Velocities from the displacement, Eq. (T9).
+                if first == 1:
+                    for k in range(3):
+                        v[0, k] = root_velocities[s, t, k]
+                finite = True
+                for i in range(first, n_particles):
+                    for k in range(3):
+                        v[i, k] = (x[i, k] - old[i, k]) / dt
+                        if not math.isfinite(v[i, k]):
+                            finite = False
+                if iterations < 0 or not finite:
+                    failed_at[lane] = s
+                    running[lane] = False
+                    continue
+                most_iterations[lane] = max(most_iterations[lane], iterations)
+                for j in range(n_segments):
+                    length = math.sqrt(edges[j, 0] ** 2 + edges[j, 1] ** 2 + edges[j, 2] ** 2)
+                    worst_errors[lane] = max(worst_errors[lane], abs(length / d - 1.0))
+        for lane in range(lanes):
+            t = first_chain + lane
+            diagnostics[t, 0] = worst_errors[lane]
+            diagnostics[t, 1] = most_iterations[lane]
+            diagnostics[t, 2] = failed_at[lane]
