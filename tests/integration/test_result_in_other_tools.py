@@ -282,14 +282,16 @@ def test_export_elsewhere_names_the_result_from_there(tentacles: Path, tmp_path:
 
 def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> None:
     """Written at flushes, from the first frame on (none of no frame: vtkXdmfReader crashes on
-    one of a single part, the 2-D fluid's): it always opens and lists frames the result holds;
-    at the end, every frame."""
+    one of a single part, the 2-D fluid's): it always opens and lists frames the result holds,
+    as a sidecar written from scratch would; at the end, every frame."""
     from jellysim.io.result import ResultWriter, frame_datasets
+    from jellysim.io.xdmf import xdmf_text
 
     path = tmp_path / "result.h5"
     writer = ResultWriter(path, frame_datasets(2, 3, 4), {"fps": 10.0}, batch_frames=2)
     assert not (tmp_path / "result.xdmf").exists()
     rng = np.random.default_rng(1)
+    checked = 0
     for k in range(5):
         writer.append(
             {
@@ -307,10 +309,18 @@ def test_the_sidecar_follows_the_frames_as_they_are_written(tmp_path: Path) -> N
         assert sidecar.is_file() == (writer.frames > 0)
         listed = len(_read_xdmf(sidecar)[0]) if sidecar.is_file() else 0
         assert 0 < listed <= writer.frames or listed == writer.frames == 0
+        if listed and listed == writer.frames:
+            # Written at this flush: the writer formats only the frames added since its last
+            # sidecar, and the text is the one written from scratch, the datasets' dimensions
+            # as the file holds them now.
+            assert sidecar.read_text() == xdmf_text(writer._file, "result.h5", range(listed))
+            checked += 1
+    assert checked >= 2  # at two flushes at least: the file grew between them
     writer.close()
     times, steps = _read_xdmf(tmp_path / "result.xdmf")
     with h5py.File(path, "r") as f:
         assert times == f["time"][()].tolist() == [0.0, 0.1, 0.2, 0.3, 0.4]
+        assert (tmp_path / "result.xdmf").read_text() == xdmf_text(f, "result.h5", range(5))
         np.testing.assert_array_equal(
             steps[4]["tentacles"]["points"], f["tentacles/position"][4].reshape(-1, 3)
         )

@@ -38,7 +38,7 @@ from jellysim import fields
 from jellysim.config.schema import DEFAULT_GROUP
 from jellysim.errors import InputError, OutputError
 from jellysim.fields import Dataset, Field
-from jellysim.io.xdmf import write_xdmf
+from jellysim.io.xdmf import SidecarCache, write_xdmf
 
 RESULT_FILE = "result.h5"
 
@@ -291,6 +291,7 @@ class ResultWriter:
         self._sidecar_bytes = 0
         self._sidecar_seconds = 0.0  # what its last write took
         self._sidecar_at = 0.0
+        self._sidecar_cache = SidecarCache()  # the texts of frames already listed
         try:
             self._write_sidecar()
         except OutputError:
@@ -330,7 +331,7 @@ class ResultWriter:
             return
         try:
             self._sidecar_bytes = write_xdmf(
-                self._file, self.path, self._sidecar, range(self.frames)
+                self._file, self.path, self._sidecar, range(self.frames), self._sidecar_cache
             )
         except OSError as err:
             raise self._fault(f"cannot write {self._sidecar.name} ({_os_reason(err)})") from None

@@ -100,13 +100,25 @@ def _heavy(f: h5py.File, reference: str, path: str) -> str:
     )
 
 
+def _placeholder(path: str) -> str:
+    """What stands for dataset ``path``'s DataItem in a cached grid (no XML text holds NUL)."""
+    return f"\x00{path}\x00"
+
+
 class _Slabs:
     """Hyperslab DataItems of the per-frame datasets of ``f``, each dataset looked up once."""
 
-    def __init__(self, f: h5py.File, reference: str) -> None:
+    def __init__(self, f: h5py.File, reference: str, placeholders: bool = False) -> None:
+        """``placeholders``: name each dataset by :func:`_placeholder` instead of its DataItem,
+        whose dimensions grow with the file's frames (:meth:`heavy` gives them when needed)."""
         self._f = f
         self._reference = reference
+        self._placeholders = placeholders
         self._known: dict[str, tuple[tuple[int, ...], str]] = {}
+
+    def heavy(self) -> dict[str, str]:
+        """Each placeholder used so far and the DataItem it stands for, as the file is now."""
+        return {_placeholder(path): _heavy(self._f, self._reference, path) for path in self._known}
 
     def __call__(self, path: str, frame: int, rows: Sequence[tuple[int, int]]) -> str:
         """Frame ``frame`` of dataset ``path``: the ``rows`` (start, count) of its leading
@@ -117,7 +129,10 @@ class _Slabs:
         and without a text of its own per frame it logs an error at each frame (or, given
         equal texts, would show one frame's points at every frame)."""
         if path not in self._known:
-            self._known[path] = (self._f[path].shape[1:], _heavy(self._f, self._reference, path))
+            heavy = (
+                _placeholder(path) if self._placeholders else _heavy(self._f, self._reference, path)
+            )
+            self._known[path] = (self._f[path].shape[1:], heavy)
         frame_shape, heavy = self._known[path]
         starts = [frame] + [start for start, _ in rows] + [0] * (len(frame_shape) - len(rows))
         counts = [1] + [count for _, count in rows] + list(frame_shape[len(rows) :])
@@ -305,22 +320,55 @@ def _grid(slab: _Slabs, part: _Part, dimensions: int, frame: int, time: float) -
     return "\n".join(lines)
 
 
-def xdmf_text(f: h5py.File, reference: str, frames: Sequence[int]) -> str:
+class SidecarCache:
+    """What a writer's repeated sidecars share: the parts and connectivity tables of its file
+    (fixed once it is created) and each frame's grids (fixed once the frame is written), so that
+    rewriting the sidecar of a growing result formats only the frames added since (issue 25:
+    rewriting all of them at every flush was a third of lions-mane's output time)."""
+
+    def __init__(self) -> None:
+        self.reference: str | None = None
+        self.parts: list[_Part] = []
+        self.tables = ""
+        self.slab: _Slabs | None = None
+        self.grids: dict[tuple[int, int], str] = {}  # (part, frame): its grid's text
+
+
+def xdmf_text(
+    f: h5py.File, reference: str, frames: Sequence[int], cache: SidecarCache | None = None
+) -> str:
     """The XDMF document describing ``frames`` of the result open as ``f``, whose file the
-    document names ``reference`` (relative to the document's folder)."""
+    document names ``reference`` (relative to the document's folder). ``cache``, kept by a
+    writer whose file only grows by frames, spares formatting again what an earlier call of the
+    same file and reference formatted; the text is the same with or without it."""
     times = f[fields.TIME.path][()]
-    parts, tables = _parts(f, reference)
-    slab = _Slabs(f, reference)
+    if cache is None or cache.reference != reference or cache.slab is None:
+        parts, tables = _parts(f, reference)
+        slab = _Slabs(f, reference, placeholders=cache is not None)
+        if cache is not None:
+            cache.reference, cache.parts, cache.tables, cache.slab = reference, parts, tables, slab
+            cache.grids.clear()
+    else:
+        parts, tables, slab = cache.parts, cache.tables, cache.slab
+    grids_of = {} if cache is None else cache.grids
     collections = []
-    for part in parts:
+    for number, part in enumerate(parts):
         dimensions = f[part.position].shape[-1]
-        grids = "\n".join(_grid(slab, part, dimensions, k, float(times[k])) for k in frames)
+        texts = []
+        for k in frames:
+            text = grids_of.get((number, k))
+            if text is None:
+                text = _grid(slab, part, dimensions, k, float(times[k]))
+                if cache is not None:
+                    grids_of[(number, k)] = text
+            texts.append(text)
+        grids = "\n".join(texts)
         collections.append(
             f'  <Grid Name="{_attribute(part.name)}" GridType="Collection" '
             'CollectionType="Temporal">\n'
             f"{grids}\n  </Grid>\n"
         )
-    return (
+    text = (
         '<?xml version="1.0" ?>\n'
         '<Xdmf Version="2.0">\n'
         " <Domain>\n"
@@ -328,6 +376,10 @@ def xdmf_text(f: h5py.File, reference: str, frames: Sequence[int]) -> str:
         " </Domain>\n"
         "</Xdmf>\n"
     )
+    if cache is not None:
+        for placeholder, heavy in slab.heavy().items():
+            text = text.replace(placeholder, heavy)
+    return text
 
 
 def result_reference(result: Path, folder: Path) -> str:
@@ -340,13 +392,20 @@ def result_reference(result: Path, folder: Path) -> str:
     return reference
 
 
-def write_xdmf(f: h5py.File, result: Path, path: Path, frames: Sequence[int]) -> int:
+def write_xdmf(
+    f: h5py.File,
+    result: Path,
+    path: Path,
+    frames: Sequence[int],
+    cache: SidecarCache | None = None,
+) -> int:
     """Write to ``path`` the XDMF document of ``frames`` of ``f``, the result at ``result``
     (named in the document by its path relative to ``path``'s folder, :func:`result_reference`),
     whole or not at all: into a temporary file of this write's own, renamed over ``path``, so
     writers of the same sidecar (a run, an export) never share one. Returns its size in bytes;
-    raises ValueError for a result XDMF cannot name, OSError for a failed write."""
-    text = xdmf_text(f, result_reference(result, path.parent), frames).encode()
+    raises ValueError for a result XDMF cannot name, OSError for a failed write. ``cache``: see
+    :func:`xdmf_text`."""
+    text = xdmf_text(f, result_reference(result, path.parent), frames, cache).encode()
     temporary = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
     out = open(temporary, "xb")  # noqa: SIM115 ("x": a file of this write's own, or an error)
     try:
