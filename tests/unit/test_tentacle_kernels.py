@@ -222,3 +222,18 @@ def test_integrator_conserves_momentum_of_a_free_chain():
     assert diagnostics[0, 2] == -1
     np.testing.assert_allclose(model.mass @ v[0], momentum, rtol=1e-9, atol=1e-15)
     assert np.linalg.norm(v[0] - v[0].mean(axis=0)) > 1e-3  # it did move and bend
+
+
+def test_chain_health_is_the_rms_speed_and_finiteness_of_each_chain():
+    from jellysim.tentacle.kernels import chain_health
+
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=(5, 7, 3))
+    v = rng.normal(size=(5, 7, 3))
+    x[1, 3, 2] = np.nan  # a position not finite
+    v[2, 6, 0] = np.inf  # a velocity not finite
+    v[3, 0, 1] = np.nan
+    rms, finite = chain_health(x, v)
+    expected = np.sqrt(np.mean(np.sum(v**2, axis=2), axis=1))
+    np.testing.assert_allclose(rms[[0, 1, 4]], expected[[0, 1, 4]], rtol=1e-14)
+    np.testing.assert_array_equal(finite, [True, False, False, False, True])

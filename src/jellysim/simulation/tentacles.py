@@ -32,9 +32,9 @@ from jellysim.tentacle.flow import flow_at_tentacles, flow_noise_for
 from jellysim.tentacle.kernels import advance_frame, rest_shape_positions
 from jellysim.tentacle.layout import RootLayout, root_layout
 from jellysim.tentacle.model import (
+    carried_curl_normals,
     chain_model_for,
     characteristic_speed,
-    curl_normals,
     medium_for,
     plan_substeps,
     rest_shape_for,
@@ -149,12 +149,8 @@ class ChainGroup:
             return np.zeros_like(directions)
         a = self.driver.axis(np.zeros(1))[0]
         b = self.driver.axis(times)  # (S, 3)
-        cross = np.cross(a, b)[:, None, :]  # (S, 1, 3): the rotation a -> b about a x b
-        cos = (b @ a)[:, None, None]
-        u = self.outward[None, :, :]  # (1, Tg, 3)
-        along = np.sum(cross * u, axis=2)[..., None]
-        outward = cos * u + np.cross(cross, u) + along / (1.0 + cos) * cross
-        return np.ascontiguousarray(curl_normals(directions, outward, b))
+        # The rotation a -> b about a x b carries the outward directions.
+        return carried_curl_normals(np.cross(a, b), b @ a, self.outward, directions, b)
 
     def reset(self) -> tuple[np.ndarray, np.ndarray]:
         """Frame 0: every tentacle in its rest shape from its root (straight along its clamp
@@ -208,6 +204,7 @@ class ChainGroup:
             self.drag_impulse.copy(),
             NO_OBSTACLE,
         )
+        kernels.chain_health(self.positions, self.velocities)  # the watchdog's
 
     def step_frame(
         self, frame: int, water: np.ndarray | None = None, obstacle: Obstacle | None = None
@@ -269,8 +266,7 @@ class ChainGroup:
                 time=when,
                 tentacle=self.rows.start + chain,
             )
-        rms = np.sqrt(np.mean(np.sum(self.velocities**2, axis=2), axis=1))
-        finite = np.isfinite(rms) & np.all(np.isfinite(self.positions), axis=(1, 2))
+        rms, finite = kernels.chain_health(self.positions, self.velocities)
         if not np.all(finite):
             chain = int(np.argmax(~finite))
             raise SimulationUnstable(

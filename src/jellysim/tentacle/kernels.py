@@ -1192,3 +1192,25 @@ def advance_frame(
             diagnostics[t, 0] = worst_errors[lane]
             diagnostics[t, 1] = most_iterations[lane]
             diagnostics[t, 2] = failed_at[lane]
+
+
+@njit(cache=True, parallel=True)
+def chain_health(positions: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per chain of ``positions``, ``velocities`` (T, P, 3): the RMS particle speed (m/s) and
+    whether every position and velocity is finite; what the run's watchdog reads each frame
+    (:meth:`jellysim.simulation.tentacles.ChainGroup.check`), in one pass over the state."""
+    n_chains, n_particles = positions.shape[0], positions.shape[1]
+    rms = np.empty(n_chains)
+    finite = np.empty(n_chains, dtype=np.bool_)
+    for t in prange(n_chains):
+        total = 0.0
+        ok = True
+        for i in range(n_particles):
+            total += velocities[t, i, 0] ** 2 + velocities[t, i, 1] ** 2 + velocities[t, i, 2] ** 2
+            for k in range(3):
+                if not math.isfinite(positions[t, i, k]):
+                    ok = False
+        mean = total / n_particles
+        rms[t] = math.sqrt(mean)
+        finite[t] = ok and math.isfinite(mean)
+    return rms, finite

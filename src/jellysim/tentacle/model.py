@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from jellysim.config.schema import Scene
 from jellysim.errors import InputError
@@ -190,16 +191,100 @@ def curl_normals(directions: np.ndarray, outward: np.ndarray, axes: np.ndarray) 
     bell axis ``axes`` (S, 3) made perpendicular to it instead, and where that fails too (a root
     on the axis pointing along it), the world x axis.
     """
+    directions = np.ascontiguousarray(directions, dtype=float)
     normals = np.empty_like(directions)
-    candidates = (outward, np.broadcast_to(axes[:, None, :], directions.shape))
-    chosen = np.zeros(directions.shape[:2], dtype=bool)
-    for candidate in (*candidates, np.broadcast_to([1.0, 0.0, 0.0], directions.shape)):
-        across = candidate - np.sum(candidate * directions, axis=2)[..., None] * directions
-        size = np.linalg.norm(across, axis=2)
-        use = ~chosen & (size > 1e-6)
-        normals[use] = across[use] / size[use][:, None]
-        chosen |= use
+    _curl_normals(
+        directions,
+        np.ascontiguousarray(np.broadcast_to(outward, directions.shape), dtype=float),
+        np.ascontiguousarray(axes, dtype=float),
+        normals,
+    )
     return normals
+
+
+@njit(cache=True)
+def _perpendicular(candidate: np.ndarray, direction: np.ndarray, out: np.ndarray) -> bool:
+    """``candidate`` made perpendicular to the unit ``direction`` and normalised into ``out``;
+    False (``out`` untouched) where less than 1e-6 of it is left."""
+    along = candidate[0] * direction[0] + candidate[1] * direction[1] + candidate[2] * direction[2]
+    a0 = candidate[0] - along * direction[0]
+    a1 = candidate[1] - along * direction[1]
+    a2 = candidate[2] - along * direction[2]
+    size = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if not size > 1e-6:
+        return False
+    out[0] = a0 / size
+    out[1] = a1 / size
+    out[2] = a2 / size
+    return True
+
+
+@njit(cache=True)
+def _curl_normals(
+    directions: np.ndarray, outward: np.ndarray, axes: np.ndarray, normals: np.ndarray
+) -> None:
+    """:func:`curl_normals` into ``normals``, every operation in NumPy's order (the same bits)."""
+    x_axis = np.array([1.0, 0.0, 0.0])
+    for s in range(directions.shape[0]):
+        for t in range(directions.shape[1]):
+            d = directions[s, t]
+            n = normals[s, t]
+            if not _perpendicular(outward[s, t], d, n):
+                if not _perpendicular(axes[s], d, n):
+                    _perpendicular(x_axis, d, n)
+
+
+def carried_curl_normals(
+    rotation: np.ndarray,
+    cos: np.ndarray,
+    outward: np.ndarray,
+    directions: np.ndarray,
+    axes: np.ndarray,
+) -> np.ndarray:
+    """:func:`curl_normals` of the outward directions ``outward`` (T, 3) at t = 0 carried by the
+    rotation that takes the bell axis at t = 0 to ``axes`` (S, 3): ``rotation`` (S, 3) the cross
+    product of the two axes and ``cos`` (S,) their dot product (Rodrigues' formula, as
+    :func:`jellysim.tentacle.kernels._transport` writes it). Compiled, in NumPy's order of
+    operations (the bits of rotating with NumPy's broadcasting, then :func:`curl_normals`)."""
+    directions = np.ascontiguousarray(directions, dtype=float)
+    normals = np.empty_like(directions)
+    _carried_curl_normals(
+        np.ascontiguousarray(rotation, dtype=float),
+        np.ascontiguousarray(cos, dtype=float),
+        np.ascontiguousarray(outward, dtype=float),
+        directions,
+        np.ascontiguousarray(axes, dtype=float),
+        normals,
+    )
+    return normals
+
+
+@njit(cache=True)
+def _carried_curl_normals(
+    rotation: np.ndarray,
+    cos: np.ndarray,
+    outward: np.ndarray,
+    directions: np.ndarray,
+    axes: np.ndarray,
+    normals: np.ndarray,
+) -> None:
+    x_axis = np.array([1.0, 0.0, 0.0])
+    carried = np.empty(3)
+    for s in range(directions.shape[0]):
+        c0, c1, c2 = rotation[s, 0], rotation[s, 1], rotation[s, 2]
+        co = cos[s]
+        for t in range(directions.shape[1]):
+            u0, u1, u2 = outward[t, 0], outward[t, 1], outward[t, 2]
+            along = c0 * u0 + c1 * u1 + c2 * u2
+            scale = along / (1.0 + co)
+            carried[0] = (co * u0 + (c1 * u2 - c2 * u1)) + scale * c0
+            carried[1] = (co * u1 + (c2 * u0 - c0 * u2)) + scale * c1
+            carried[2] = (co * u2 + (c0 * u1 - c1 * u0)) + scale * c2
+            d = directions[s, t]
+            n = normals[s, t]
+            if not _perpendicular(carried, d, n):
+                if not _perpendicular(axes[s], d, n):
+                    _perpendicular(x_axis, d, n)
 
 
 def medium_for(scene: Scene) -> Medium:
