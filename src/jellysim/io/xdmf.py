@@ -323,8 +323,7 @@ def _grid(slab: _Slabs, part: _Part, dimensions: int, frame: int, time: float) -
 class SidecarCache:
     """What a writer's repeated sidecars share: the parts and connectivity tables of its file
     (fixed once it is created) and each frame's grids (fixed once the frame is written), so that
-    rewriting the sidecar of a growing result formats only the frames added since (issue 25:
-    rewriting all of them at every flush was a third of lions-mane's output time)."""
+    rewriting the sidecar of a growing result formats only the frames added since."""
 
     def __init__(self) -> None:
         self.reference: str | None = None

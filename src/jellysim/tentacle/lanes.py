@@ -1,5 +1,5 @@
 """The banded LDL^T solve of several chains at once, one chain in each lane of a vector register
-(issue 25: the solve was half of the tentacle kernel; docs/theory/tentacle.md, Eq. T7).
+(docs/theory/tentacle.md, Eq. T7; docs/decisions.md, "Chains in the lanes of a vector").
 
 :func:`band_ldlt_solve_lanes` performs, lane by lane, exactly the arithmetic of the scalar
 :func:`jellysim.tentacle.kernels._band_ldlt_solve` (the same products, fused multiply-adds and
@@ -42,6 +42,8 @@ def _lane_arrays_ok(band: Any, inverse_pivots: Any, rhs: Any) -> bool:
 
 @intrinsic
 def _band_ldlt_solve_lanes(typingctx: Any, band: Any, inverse_pivots: Any, rhs: Any) -> Any:
+    """In compiled code: :func:`band_ldlt_solve_lanes` without its shape checks (the caller
+    allocates the arrays). Typing refuses other than the arrays :func:`_lane_arrays_ok` names."""
     if not _lane_arrays_ok(band, inverse_pivots, rhs):
         return None
     signature = types.void(band, inverse_pivots, rhs)
