@@ -32,12 +32,13 @@ from typing import Any
 import numpy as np
 
 from jellysim.fluid.geometry import DUMMY, FLUID, WALL
-from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT, Constants
+from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT
 from jellysim.fluid.mps import (
     MPSParameters,
     PhaseTimer,
     StepStats,
     lattice_reference,
+    solver_setup,
     step_limits,
 )
 from jellysim.fluid.solvers import FluidDiverged
@@ -812,45 +813,20 @@ class GPUSolver:
             raise RuntimeError(reason)
         self._cuda = cuda
         self.k = _kernels()
-        positions = np.asarray(positions, dtype=np.float64)
-        if positions.ndim != 2 or positions.shape[1] != params.dim:
-            raise ValueError(f"positions must be (N, {params.dim}), not {positions.shape}")
-        if kinds.shape != (positions.shape[0],):
-            raise ValueError("kinds must be (N,)")
+        setup = solver_setup(params, positions, kinds)
+        positions = setup.positions
         self.params = p = params
         l0, dim = p.l0, p.dim
-        self.reference = {
-            "number_density": lattice_reference(dim, l0, p.re_number_density, p.lattice),
-            "gradient": lattice_reference(dim, l0, p.re_gradient, p.lattice),
-            "laplacian": lattice_reference(dim, l0, p.laplacian_radius, p.lattice),
-        }
-        self.constants = Constants(
-            dim=dim,
-            re_number_density=p.re_number_density * l0,
-            re_gradient=p.re_gradient * l0,
-            re_laplacian=p.laplacian_radius * l0,
-            n0=self.reference["number_density"].n0,
-            n0_gradient=self.reference["gradient"].n0,
-            n0_laplacian=self.reference["laplacian"].n0,
-            lambda_laplacian=self.reference["laplacian"].lambda_,
-            density=p.density,
-            kinematic_viscosity=p.kinematic_viscosity,
-        )
-        self.search_radius = p.neighbour_radius * l0
+        self.reference = setup.reference
+        self.constants = setup.constants
+        self.search_radius = setup.search_radius
         n = positions.shape[0]
         self.n = n
-        self.kind = kinds.astype(np.int8).copy()
+        self.kind = setup.kind
         self.time = 0.0
         self.searches = 0
-        if p.domain_min is None or p.domain_max is None:
-            low = positions.min(axis=0)
-            high = positions.max(axis=0)
-            size = high - low
-            self.domain_min = low - size
-            self.domain_max = high + size
-        else:
-            self.domain_min = np.asarray(p.domain_min, dtype=np.float64)
-            self.domain_max = np.asarray(p.domain_max, dtype=np.float64)
+        self.domain_min = setup.domain_min
+        self.domain_max = setup.domain_max
         # The cell grid, cells as wide as the search radius, over the particles' initial box
         # and a cell around it: a particle beyond it counts in the nearest cell on its edge
         # (clamping keeps two particles within the radius in neighbouring cells, so no pair

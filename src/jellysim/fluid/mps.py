@@ -335,6 +335,63 @@ class PhaseTimer:
         self.seconds[name] = self.seconds.get(name, 0.0) + _time.perf_counter() - start
 
 
+class SolverSetup(NamedTuple):
+    """What every solver of :class:`MPSParameters` derives from them and the initial particles
+    alike, the CPU's and the GPU's (:func:`solver_setup`)."""
+
+    positions: np.ndarray  # (N, dim) float64 m, checked
+    kind: np.ndarray  # (N,) int8 FLUID, WALL or DUMMY, a copy
+    reference: dict[str, LatticeReference]  # per weight's radius: n0 and lambda, Eq. (F2-F3)
+    constants: kernels.Constants
+    search_radius: float  # m: the neighbour lists' reach
+    domain_min: np.ndarray  # (dim,) m: a particle leaving the box escapes
+    domain_max: np.ndarray  # (dim,) m
+
+
+def solver_setup(params: MPSParameters, positions: np.ndarray, kinds: np.ndarray) -> SolverSetup:
+    """Check the particles against ``params`` and derive the reference values (Eq. F2-F3), the
+    kernels' constants, the search radius and the domain (``params``' or, unset, the particles'
+    box widened by its size on every side). Raises ValueError for arrays of the wrong shape."""
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 2 or positions.shape[1] != params.dim:
+        raise ValueError(f"positions must be (N, {params.dim}), not {positions.shape}")
+    if kinds.shape != (positions.shape[0],):
+        raise ValueError("kinds must be (N,)")
+    l0, dim, lattice = params.l0, params.dim, params.lattice
+    number_density = lattice_reference(dim, l0, params.re_number_density, lattice)
+    gradient = lattice_reference(dim, l0, params.re_gradient, lattice)
+    laplacian = lattice_reference(dim, l0, params.laplacian_radius, lattice)
+    constants = kernels.Constants(
+        dim=dim,
+        re_number_density=params.re_number_density * l0,
+        re_gradient=params.re_gradient * l0,
+        re_laplacian=params.laplacian_radius * l0,
+        n0=number_density.n0,
+        n0_gradient=gradient.n0,
+        n0_laplacian=laplacian.n0,
+        lambda_laplacian=laplacian.lambda_,
+        density=params.density,
+        kinematic_viscosity=params.kinematic_viscosity,
+    )
+    if params.domain_min is None or params.domain_max is None:
+        low = positions.min(axis=0)
+        high = positions.max(axis=0)
+        size = high - low
+        domain_min, domain_max = low - size, high + size
+    else:
+        domain_min = np.asarray(params.domain_min, dtype=np.float64)
+        domain_max = np.asarray(params.domain_max, dtype=np.float64)
+    return SolverSetup(
+        positions=positions,
+        kind=kinds.astype(np.int8).copy(),
+        reference={"number_density": number_density, "gradient": gradient, "laplacian": laplacian},
+        constants=constants,
+        search_radius=params.neighbour_radius * l0,
+        domain_min=domain_min,
+        domain_max=domain_max,
+    )
+
+
 class MPSSolver:
     """An MPS fluid: live state arrays mutated in place by :meth:`step`.
 
@@ -348,53 +405,22 @@ class MPSSolver:
     """
 
     def __init__(self, params: MPSParameters, positions: np.ndarray, kinds: np.ndarray) -> None:
-        positions = np.asarray(positions, dtype=np.float64)
-        if positions.ndim != 2 or positions.shape[1] != params.dim:
-            raise ValueError(f"positions must be (N, {params.dim}), not {positions.shape}")
-        if kinds.shape != (positions.shape[0],):
-            raise ValueError("kinds must be (N,)")
+        setup = solver_setup(params, positions, kinds)
         self.params = params
-        l0 = params.l0
         dim = params.dim
-        lattice = params.lattice
-        number_density = lattice_reference(dim, l0, params.re_number_density, lattice)
-        gradient = lattice_reference(dim, l0, params.re_gradient, lattice)
-        laplacian = lattice_reference(dim, l0, params.laplacian_radius, lattice)
-        self.reference = {
-            "number_density": number_density,
-            "gradient": gradient,
-            "laplacian": laplacian,
-        }
-        self.constants = kernels.Constants(
-            dim=dim,
-            re_number_density=params.re_number_density * l0,
-            re_gradient=params.re_gradient * l0,
-            re_laplacian=params.laplacian_radius * l0,
-            n0=number_density.n0,
-            n0_gradient=gradient.n0,
-            n0_laplacian=laplacian.n0,
-            lambda_laplacian=laplacian.lambda_,
-            density=params.density,
-            kinematic_viscosity=params.kinematic_viscosity,
-        )
-        self.search_radius = params.neighbour_radius * l0
-        n = positions.shape[0]
-        self.position = positions.copy()
+        self.reference = setup.reference
+        self.constants = setup.constants
+        self.search_radius = setup.search_radius
+        n = setup.positions.shape[0]
+        self.position = setup.positions.copy()
         self.velocity = np.zeros((n, dim))
         self.pressure = np.zeros(n)
         self.number_density = np.zeros(n)
         self.alive = np.ones(n, dtype=np.bool_)
-        self.kind = kinds.astype(np.int8).copy()
+        self.kind = setup.kind
         self.time = 0.0
-        if params.domain_min is None or params.domain_max is None:
-            low = positions.min(axis=0)
-            high = positions.max(axis=0)
-            size = high - low
-            self.domain_min = low - size
-            self.domain_max = high + size
-        else:
-            self.domain_min = np.asarray(params.domain_min, dtype=np.float64)
-            self.domain_max = np.asarray(params.domain_max, dtype=np.float64)
+        self.domain_min = setup.domain_min
+        self.domain_max = setup.domain_max
         # scratch
         self._position = np.empty_like(self.position)
         self._velocity = np.empty_like(self.velocity)
