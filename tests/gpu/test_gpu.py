@@ -161,21 +161,17 @@ def test_spheric_probes_match_the_cpu(tmp_path) -> None:
     assert on_cpu[heights][-1, 3] > 0.5 and on_cpu[pressures][-1, -2] > 4000.0  # H4, floor
 
 
-def test_spheric_at_a_million_particles() -> None:
+def test_spheric_at_a_million_particles(tmp_path) -> None:
     """SPHERIC Test 2 at l0 = 0.161 / 17 (1,121,729 fluid particles, 1,709,519 in all) for
     5 ms in 2.5 ms frames on the GPU alone (the CPU path would take minutes here): the state
     and the probes are finite; the gauges H1-H3 and the box's sensors are dry, the reservoir's
     H4 reads its 71 layers (0.549 m) and its floor's sensor rho g H within 10 % (the column
     has barely started to fall); the device's probe sums are the host formula's."""
-    import tempfile
-    from pathlib import Path
-
     from jellysim.fluid.geometry import FLUID
     from jellysim.fluid.probes import weighted_sums
     from jellysim.simulation.fluid import FluidSimulation
 
-    with tempfile.TemporaryDirectory() as folder:
-        simulation = FluidSimulation(_spheric_scene(Path(folder), 0.161 / 17, 0.005, 400.0))
+    simulation = FluidSimulation(_spheric_scene(tmp_path, 0.161 / 17, 0.005, 400.0))
     solver = simulation.solver
     assert np.sum(solver.kind == FLUID) >= 1_000_000
     frames = _probe_frames(simulation)
