@@ -11,7 +11,11 @@ Cases, each from rest at its preset's scheme (the pressure to a relative residua
 - ``moon-jelly-water``: moon-jelly's water without its bell (its tank, spacing and scheme: a
   filled 6.4 m tank at l0 = 0.16 m, 57,600 fluid particles, mixed source, corrected gradient),
   the fluid issue 28 asks 200 steps/s of;
-- ``tank-3d-million``: tank-3d at a / l0 = 80 (1,024,000 fluid particles).
+- ``tank-3d-million``: tank-3d at a / l0 = 80 (1,024,000 fluid particles);
+- ``spheric-test2-million``: the SPHERIC Test 2 preset at l0 = 0.161 / 17 = 9.5 mm (1,121,729
+  fluid and 587,790 wall and dummy particles), its eight pressure probes read on the GPU each
+  step as a run reads them (the steps from rest, before the column has gathered speed: the
+  steps of the run's first moments, not its mean step).
 
 ``--cpu-threads N`` (0: none) also times the CPU path on N threads for the cases under 100,000
 particles; ``--compare-steps K`` then steps both paths K times with the CPU's dt and prints the
@@ -51,18 +55,25 @@ CASES: dict[str, tuple[str, dict[str, object]]] = {
         },
     ),
     "tank-3d-million": ("tank-3d", {"fluid.spacing": 0.1 / 80}),
+    "spheric-test2-million": ("spheric-test2", {"fluid.spacing": 0.161 / 17}),
 }
 
 
-def _time_steps(solver, steps: int) -> tuple[float, dict[str, float], list[int], float]:
-    """Seconds for ``steps`` steps at the stable dt, the seconds per phase, the iterations and
-    the simulated time covered."""
+def _time_steps(
+    solver, steps: int, after_step=None
+) -> tuple[float, dict[str, float], list[int], float]:
+    """Seconds for ``steps`` steps at the stable dt (each followed by ``after_step(dt)``, the
+    probes, where given), the seconds per phase, the iterations and the simulated time
+    covered."""
     seconds: dict[str, float] = {}
     iterations = []
     started = solver.time
     clock = time.perf_counter()
     for _ in range(steps):
-        stats = solver.step(solver.stable_dt())
+        dt = solver.stable_dt()
+        stats = solver.step(dt)
+        if after_step is not None:
+            after_step(dt)
         iterations.append(stats.iterations)
         for phase, value in stats.seconds.items():
             seconds[phase] = seconds.get(phase, 0.0) + value
@@ -95,9 +106,13 @@ def main() -> None:
         simulation = FluidSimulation(scene)
         device = simulation.solver
         fluid = int(np.sum(device.kind == FLUID))
+        probes = simulation.probes
+        after_step = None if probes is None else probes.after_step
         device.step(device.stable_dt())  # compiles the kernels
+        if after_step is not None:
+            after_step(0.0)  # compiles the probes' kernel
         first = time.perf_counter() - clock
-        wall, seconds, iterations, simulated = _time_steps(device, args.steps)
+        wall, seconds, iterations, simulated = _time_steps(device, args.steps, after_step)
         phases = ", ".join(f"{k} {1000 * v / args.steps:.2f} ms" for k, v in seconds.items())
         print(
             f"{case} GPU: {fluid} fluid + {len(device.kind) - fluid} wall/dummy particles "
@@ -105,9 +120,17 @@ def main() -> None:
             f"{fluid * args.steps / wall:.3g} particle-steps/s, "
             f"{wall / simulated:.1f} s per simulated second (dt {simulated / args.steps:.3g} s); "
             f"Jacobi-CG iterations {np.mean(iterations):.0f} (mean); per step: {phases}; "
-            f"neighbour-list width {device.width}",
+            f"neighbour-list width {device.width}"
+            + ("" if probes is None else f"; {len(probes.pressure_names)} pressure probes read"),
             flush=True,
         )
+        if probes is not None:  # heights now, pressures the mean over the timed steps
+            probes.end_frame()
+            print(
+                f"{case} probes at t = {device.time:.4f} s: "
+                + ", ".join(f"{k} {np.round(v, 4)}" for k, v in probes.frame_values().items()),
+                flush=True,
+            )
         if args.cpu_threads <= 0 or fluid > 100_000:
             continue
         numba.set_num_threads(args.cpu_threads)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The GPU path measured on a machine with an NVIDIA GPU and 16 cores (issue 28;
 # docs/performance.md): the GPU tests, bench_gpu.py (GPU steps/s at 54,000, 57,600 and
-# 1,024,000 fluid particles beside the CPU on 16 threads, and the two paths' water compared),
+# 1,024,000 fluid particles beside the CPU on 16 threads, and the two paths' water compared;
+# then SPHERIC Test 2 at 1,121,729 fluid particles with its pressure probes read each step),
 # the 3-D tank's CPU step on 1-16 threads (bench_fluid.py), and dam-break-2d run on the GPU
 # and plotted against Martin & Moyce.
 #   bash benchmarks/gpu_device.sh OUTDIR
@@ -17,13 +18,15 @@ say "== machine"
   $py -c "import numba, numpy, sys; print('python', sys.version.split()[0], 'numba', numba.__version__, 'numpy', numpy.__version__)"
   $py -m pip show numba-cuda 2>/dev/null | grep -E "^Version"; } 2>&1 | tee -a "$out/log"
 say "== bench_gpu.py"
-timeout 220 $py benchmarks/bench_gpu.py --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 2>&1 | tee -a "$out/log"
+timeout 220 $py benchmarks/bench_gpu.py --case tank-3d --case moon-jelly-water --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 2>&1 | tee -a "$out/log"
+say "== bench_gpu.py --case spheric-test2-million"
+timeout 150 $py benchmarks/bench_gpu.py --case spheric-test2-million --steps 20 2>&1 | tee -a "$out/log"
 say "== CPU threads: bench_fluid.py --case tank-3d"
 for threads in ${THREADS-16 8 4 2 1}; do
   timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
 done
 say "== tests/gpu"
-JELLYSIM_TEST_GPU=1 timeout 100 $py -m pytest -q -p no:cacheprovider tests/gpu 2>&1 | tail -15 | tee -a "$out/log"
+JELLYSIM_TEST_GPU=1 timeout 200 $py -m pytest -q -p no:cacheprovider tests/gpu 2>&1 | tail -15 | tee -a "$out/log"
 say "== jellysim run dam-break-2d --device cuda"
 ( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"
 timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log"

@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -612,6 +613,17 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
         if i < x.shape[0]:
             pressure[i] = max(x[i], 0.0) if unknown[i] == 1 else 0.0
 
+    @cuda.jit
+    def weighted_sums(values, start, index, weight, out):
+        """out_k = sum over m in [start_k, start_k+1) of weight_m values[index_m], in m's order
+        (the wall-pressure probes, Eq. F15): one thread a sum, a dozen terms each."""
+        k = cuda.grid(1)
+        if k < out.shape[0]:
+            total = 0.0
+            for m in range(start[k], start[k + 1]):
+                total += weight[m] * values[index[m]]
+            out[k] = total
+
     # ----------------------------------------------------------------------------- correction
 
     @cuda.jit(device=True)
@@ -919,6 +931,33 @@ class GPUSolver:
     @property
     def alive(self) -> np.ndarray:
         return self._download("alive", self._d_alive)
+
+    # ------------------------------------------------------------------------------- probes
+
+    def pressure_gauge(
+        self, rows: Sequence[np.ndarray], weights: Sequence[np.ndarray]
+    ) -> Callable[[], np.ndarray]:
+        """As :meth:`MPSSolver.pressure_gauge`, the sums taken on the GPU: ``rows`` and
+        ``weights`` are uploaded once (concatenated, with each sum's start), and each call
+        launches one thread a sum and downloads the K sums, not the N pressures."""
+        sums = len(rows)
+        if [len(r) for r in rows] != [len(w) for w in weights]:
+            raise ValueError("each sum needs as many weights as rows")
+        if sums == 0:
+            return lambda: np.zeros(0)
+        start = np.zeros(sums + 1, dtype=np.int64)
+        start[1:] = np.cumsum([len(r) for r in rows])
+        d = self._cuda.to_device
+        index = d(np.concatenate(rows).astype(np.int64))
+        weight = d(np.concatenate(weights).astype(np.float64))
+        d_start, out = d(start), self._cuda.device_array(sums)
+        kernel = self.k["weighted_sums"][_grid(sums), BLOCK]
+
+        def gauge() -> np.ndarray:
+            kernel(self._d_pressure, d_start, index, weight, out)
+            return out.copy_to_host()
+
+        return gauge
 
     # --------------------------------------------------------------------------- neighbours
 

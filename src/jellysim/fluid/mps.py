@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -42,6 +42,7 @@ from jellysim.fluid.neighbours import (
     search_neighbours,
 )
 from jellysim.fluid.poisson import assemble_poisson, number_unknowns
+from jellysim.fluid.probes import weighted_sums
 from jellysim.fluid.solvers import PRESSURE_SOLVERS, CoarseSpace, FluidDiverged, solve
 
 SOURCES = ("standard", "mixed")
@@ -811,6 +812,14 @@ class MPSSolver:
         return -p.density / dt * divergence[particles] + (
             p.mixed_relaxation * p.density / dt**2 * deviation
         )
+
+    def pressure_gauge(
+        self, rows: Sequence[np.ndarray], weights: Sequence[np.ndarray]
+    ) -> Callable[[], np.ndarray]:
+        """A function giving (K,) Pa, ``sum_j weights[k][j] pressure[rows[k][j]]`` for each of
+        the K pairs of ``rows`` (int) and ``weights`` (float), at the pressure when it is called
+        (the wall-pressure probes, Eq. F15): :func:`~jellysim.fluid.probes.weighted_sums`."""
+        return lambda: weighted_sums(self.pressure, rows, weights)
 
     # ---------------------------------------------------------------------------- checkpoints
 

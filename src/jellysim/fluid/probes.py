@@ -18,13 +18,24 @@ among the tank's walls and the faces of the obstacle it is in (:func:`face_of`),
 sensor near an edge (the box's P4 and P5, 0.021 m from its top edge) does not read the other
 face's walls. The walls do not move, so the weights are computed once. The result stores
 its mean over each frame's steps, weighted by their dt: single steps' pressures are noisy.
+
+The sums of Eq. (F15) are taken where the pressure is: the solver's ``pressure_gauge(rows,
+weights)`` gives a function that returns them for the pressure now, :func:`weighted_sums` on
+the host (:class:`~jellysim.fluid.mps.MPSSolver`), a kernel on the GPU
+(:class:`~jellysim.fluid.gpu.GPUSolver`, which downloads K numbers a step, not the N
+pressures).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from jellysim.fluid.geometry import FLUID, SITE_VOLUME, WALL
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
 
 PROBE_RADIUS = 2.0  # R of both probes, in l0
 
@@ -83,10 +94,20 @@ def face_of(points: np.ndarray, tank: np.ndarray, boxes: np.ndarray, margin: flo
     return np.argmin(distance, axis=1)
 
 
+def weighted_sums(
+    values: np.ndarray, rows: Sequence[np.ndarray], weights: Sequence[np.ndarray]
+) -> np.ndarray:
+    """(K,): ``sum_j weights[k][j] values[rows[k][j]]`` for each k, of ``values`` (N,) and K
+    pairs of ``rows`` (int) and ``weights`` (float, of the same length): Eq. (F15) on the host,
+    with the weights normalised."""
+    return np.array([w @ values[r] for r, w in zip(rows, weights, strict=True)])
+
+
 class PressureProbes:
     """Wall pressure (Pa) at ``points`` ((K, D) m), Eq. (F15), averaged over the steps of a
     frame by :meth:`add_step` and :meth:`frame_mean`. ``tank`` and ``boxes``: as
-    :func:`face_of`."""
+    :func:`face_of`. ``rows[k]`` (int) and ``weights[k]`` (summing to 1) are probe k's wall
+    particles and their weights ``w_j / sum_j w_j``."""
 
     def __init__(
         self,
@@ -117,19 +138,18 @@ class PressureProbes:
 
     def measure(self, pressure: np.ndarray) -> np.ndarray:
         """(K,) Pa: the probes' pressures for the particles' ``pressure`` (N,) Pa now."""
-        return np.array(
-            [w @ pressure[rows] for rows, w in zip(self.rows, self.weights, strict=True)]
-        )
+        return weighted_sums(pressure, self.rows, self.weights)
 
-    def add_step(self, pressure: np.ndarray, dt: float) -> None:
-        """Add a step of ``dt`` (s) that ended with ``pressure`` (N,) Pa to the frame's mean."""
-        self._sum += dt * self.measure(pressure)
+    def add_step(self, probe_pressure: np.ndarray, dt: float) -> None:
+        """Add a step of ``dt`` (s) that ended with the probes' pressures ``probe_pressure``
+        (K,) Pa (:meth:`measure`, or the solver's ``pressure_gauge``) to the frame's mean."""
+        self._sum += dt * probe_pressure
         self._time += dt
 
-    def frame_mean(self, pressure: np.ndarray) -> np.ndarray:
-        """(K,) Pa: the mean over the steps added since the last call (the pressure now when
-        none was), and start the next frame's."""
-        mean = self._sum / self._time if self._time > 0 else self.measure(pressure)
+    def frame_mean(self, now: Callable[[], np.ndarray]) -> np.ndarray:
+        """(K,) Pa: the mean over the steps added since the last call (``now()``, the probes'
+        pressures now, when none was), and start the next frame's."""
+        mean = self._sum / self._time if self._time > 0 else now()
         self._sum[:] = 0.0
         self._time = 0.0
         return mean

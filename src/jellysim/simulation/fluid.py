@@ -69,7 +69,9 @@ def report(solver: MPSSolver, stats: FrameStats) -> None:
 class Probes:
     """A scene's height and pressure probes (:mod:`jellysim.fluid.probes`) on its solver, and
     their datasets ``probes/height`` (F, H) m and ``probes/pressure`` (F, K) Pa, each with the
-    probes' ``names``."""
+    probes' ``names``. The pressure probes are read each step through the solver's
+    ``pressure_gauge`` (on the GPU, K numbers a step come to the host); the heights once a
+    frame, from the frame's host copies of the state."""
 
     def __init__(self, scene: Scene, solver: MPSSolver) -> None:
         p = scene.probes
@@ -88,14 +90,15 @@ class Probes:
             tank_corner(scene),
             np.array(scene.fluid.obstacles).reshape(-1, 2 * dim),
         )
+        self.gauge = solver.pressure_gauge(self.pressure.rows, self.pressure.weights)
         self.end_frame()  # frame 0 (or a restored frame): the pressure now
 
     def after_step(self, dt: float) -> None:
-        self.pressure.add_step(self.solver.pressure, dt)
+        self.pressure.add_step(self.gauge(), dt)
 
     def end_frame(self) -> None:
         """Close the frame's pressure means (called once a frame, after its steps)."""
-        self.frame_pressure = self.pressure.frame_mean(self.solver.pressure)
+        self.frame_pressure = self.pressure.frame_mean(self.gauge)
 
     def frame_values(self) -> dict[str, np.ndarray]:
         s = self.solver
