@@ -308,3 +308,22 @@ def test_a_run_resumes_on_the_other_device() -> None:
     assert on_gpu != on_cpu and same_scene(on_gpu, on_cpu)
     other = scene_to_toml(load_scene("hydrostatic-2d", {"fluid.courant": 0.1}))
     assert not same_scene(on_gpu, other)
+
+
+def test_escaped_particles_are_counted_on_the_gpu_as_on_the_cpu() -> None:
+    """A particle thrown out of the domain dies on both devices; the GPU counts the dead on the
+    device (no download of the alive flags a step), and a restored state brings its count."""
+    cpu, device, kinds, _ = _pair("standard-2d")
+    dt = cpu.stable_dt()  # of the water at rest: the thrown particle leaves in one step
+    state = cpu.state_arrays()
+    thrown = int(np.flatnonzero(cpu.kind == FLUID)[0])
+    state["velocity"][thrown] = [-1.0e4, 0.0]  # beyond the domain (twice the tank) in one step
+    cpu.restore(state)
+    device.restore(state)
+    on_cpu, on_gpu = cpu.step(dt), device.step(dt)
+    assert on_cpu.dead == on_gpu.dead == 1
+    np.testing.assert_array_equal(device.alive, cpu.alive)
+    assert not device.alive[thrown]
+    resumed = gpu.GPUSolver(device.params, state["position"], kinds)
+    resumed.restore(device.state_arrays())
+    assert resumed.step(dt).dead == device.step(dt).dead == 1

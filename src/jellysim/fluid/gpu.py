@@ -771,8 +771,9 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
             out_position[i, k] += dt * du
 
     @cuda.jit
-    def escape(position, velocity, pressure, kind, alive, lower, upper):
-        """Live fluid particles outside the domain or no longer finite die."""
+    def escape(position, velocity, pressure, kind, alive, lower, upper, dead):
+        """Live fluid particles outside the domain or no longer finite die; ``dead[0]`` counts
+        them (an integer sum: the same whatever the order)."""
         i = cuda.grid(1)
         if i >= position.shape[0] or not (alive[i] and kind[i] == fluid_kind):
             return
@@ -784,6 +785,7 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
                 dying = True
         if dying:
             alive[i] = False
+            cuda.atomic.add(dead, 0, 1)
             pressure[i] = 0.0
             for k in range(position.shape[1]):
                 velocity[i, k] = 0.0
@@ -896,6 +898,7 @@ class GPUSolver:
         self._partial = da((2, _grid(n), 3))  # the CG's block sums, two slots
         self._solve_out = da(3)
         self._flag = da(1, dtype=np.int32)
+        self._dead = cuda.to_device(np.zeros(1, dtype=np.int64))  # dead particles so far
         self._cg_blocks = 0  # the cooperative grid's blocks, found at the first solve
         self._extent = da(4)
         self._allocate_lists(self.width)
@@ -1125,10 +1128,10 @@ class GPUSolver:
             self.time += dt
             k["escape"][g, BLOCK](
                 self._d_position, self._d_velocity, self._d_pressure, self._d_kind,
-                self._d_alive, self._d_domain_min, self._d_domain_max,
+                self._d_alive, self._d_domain_min, self._d_domain_max, self._dead,
             )  # fmt: skip
             sync()
-            stats.dead = int((~self.alive).sum())
+            stats.dead = int(self._dead.copy_to_host()[0])  # not the whole alive array
         return stats
 
     def _solve(self) -> tuple[int, float]:
@@ -1198,6 +1201,7 @@ class GPUSolver:
             raise ValueError(f"kind: shape {arrays['kind'].shape}, expected {self.kind.shape}")
         for name, target in targets.items():
             target.copy_to_device(values[name])
+        self._dead.copy_to_device(np.array([np.count_nonzero(~values["alive"])], dtype=np.int64))
         self.kind[:] = arrays["kind"]
         self._d_kind.copy_to_device(self.kind)
         self._rows_all.copy_to_device((self.kind != DUMMY).astype(np.bool_))
