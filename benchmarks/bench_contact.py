@@ -3,12 +3,15 @@ tentacle.md §8) at the full ``moon-jelly``, in its first contraction, where the
 the fringe.
 
     .venv/bin/python benchmarks/bench_contact.py [--frames 14] [--repeats 5]
+    .venv/bin/python benchmarks/bench_contact.py --recorded [--repeats 20]
 
 Runs ``moon-jelly`` for ``--frames`` frames (0.7 s: the margin has swept over the fringe since
 0.55 s), then times the tentacles' next frame from that state with the contact and without it
 (the mean of the repeats, the state restored before each), beside one frame of the bell in its
 water; prints how many of the fringe's particles end that frame inside the wall without the
-contact.
+contact. With ``--recorded``, instead: the best of the repeats of each recorded fringe frame of
+``tests/data/moon_jelly_fringe_*.npz`` (one tentacle, tests/data/README.md) through the kernel,
+with the contact and without it, loading included.
 """
 
 from __future__ import annotations
@@ -17,18 +20,64 @@ import argparse
 import os
 import platform
 import time
+from pathlib import Path
 
 import numpy as np
 
 import jellysim
-from jellysim.tentacle.contact import inside_shell, shell_obstacle
+from jellysim.bell.kinematic import bell_faces
+from jellysim.tentacle.contact import inside_shell, no_obstacle, shell_obstacle
+from jellysim.tentacle.kernels import ChainModel, Medium, advance_frame
+
+RECORDED = Path(__file__).parents[1] / "tests" / "data"
+
+
+def recorded_frame(path: Path, contact: bool) -> None:
+    """One recorded frame of one fringe tentacle through :func:`advance_frame`."""
+    data = np.load(path)
+
+    def fields(prefix: str, names: tuple[str, ...]) -> dict[str, object]:
+        values = {name: data[f"{prefix}_{name}"] for name in names}
+        return {name: v.item() if v.ndim == 0 else v for name, v in values.items()}
+
+    obstacle = shell_obstacle(data["shell_start"], data["shell_end"], bell_faces(50))
+    x = data["positions"][None].copy()
+    advance_frame(
+        x, data["velocities"][None].copy(), data["root_positions"][:, None],
+        data["root_velocities"][:, None], data["root_directions"][:, None],
+        data["curl_normals"][:, None], np.zeros_like(x), data["flow"][:, None],
+        ChainModel(**fields("model", ChainModel._fields)),
+        Medium(**fields("medium", Medium._fields)), float(data["dt"]), np.zeros((1, 3)),
+        np.zeros((1, 0, 3)), obstacle if contact else no_obstacle(),
+    )  # fmt: skip
+
+
+def time_recorded(repeats: int) -> None:
+    for path in sorted(RECORDED.glob("moon_jelly_fringe_*.npz")):
+        best = {}
+        for contact in (True, False):
+            recorded_frame(path, contact)  # compile, if the cache is cold
+            times = []
+            for _ in range(repeats):
+                begin = time.perf_counter()
+                recorded_frame(path, contact)
+                times.append(time.perf_counter() - begin)
+            best[contact] = min(times)
+        print(
+            f"{path.stem}: {1e3 * best[True]:.2f} ms with the contact, "
+            f"{1e3 * best[False]:.2f} ms without"
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=14)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--recorded", action="store_true")
     args = parser.parse_args()
+    if args.recorded:
+        time_recorded(args.repeats)
+        return
     simulation = jellysim.Simulation(jellysim.load_scene("moon-jelly", {"duration": 2.0}))
     simulation.prepare()
     for _ in range(args.frames):

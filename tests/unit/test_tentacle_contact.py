@@ -267,14 +267,12 @@ def test_a_particle_on_a_wall_slides_along_its_tangent_plane() -> None:
     assert inverse_mass[3] * pushes[3] < -1e-3 * spacing  # the first one is pressed on it
 
 
-def test_a_fringe_tentacle_pressed_under_the_margin_slides_along_it() -> None:
-    """One of `moon-jelly`'s fringe tentacles over the frame in which its margin re-opens over it
-    (t = 1.65-1.70 s; tests/data/README.md). Particles 3 and 4 are pushed into the wall above
-    the root in every substep. Held where they were pushed (the rounds before the planes of
-    Eq. T17), the projection pulled them back in: 2 particles inside after the frame, 2.2 mm
-    deep. Kept on the wall's tangent planes, the chain slides along the wall: none inside, the
-    lengths exact."""
-    data = np.load(Path(__file__).parents[1] / "data" / "moon_jelly_fringe_under_the_margin.npz")
+def advance_recorded_frame(name: str, contact: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One recorded frame of one `moon-jelly` fringe tentacle (``tests/data/<name>.npz``, see
+    tests/data/README.md) through :func:`advance_frame`, with the bell's shell or without it: its
+    positions (P, 3) after the frame, the kernel's diagnostics (3,) and the shell's vertices at
+    the frame's end."""
+    data = np.load(Path(__file__).parents[1] / "data" / f"{name}.npz")
 
     def fields(prefix: str, names: tuple[str, ...]) -> dict[str, object]:
         values = {name: data[f"{prefix}_{name}"] for name in names}
@@ -282,8 +280,7 @@ def test_a_fringe_tentacle_pressed_under_the_margin_slides_along_it() -> None:
 
     model = ChainModel(**fields("model", ChainModel._fields))
     medium = Medium(**fields("medium", Medium._fields))
-    faces = bell_faces(50)
-    obstacle = shell_obstacle(data["shell_start"], data["shell_end"], faces)
+    obstacle = shell_obstacle(data["shell_start"], data["shell_end"], bell_faces(50))
     x = data["positions"][None].copy()
     v = data["velocities"][None].copy()
     diagnostics = np.zeros((1, 3))
@@ -291,21 +288,134 @@ def test_a_fringe_tentacle_pressed_under_the_margin_slides_along_it() -> None:
         x, v, data["root_positions"][:, None], data["root_velocities"][:, None],
         data["root_directions"][:, None], data["curl_normals"][:, None], np.zeros_like(x),
         data["flow"][:, None], model, medium, float(data["dt"]), diagnostics,
-        np.zeros((1, 0, 3)), obstacle,
+        np.zeros((1, 0, 3)), obstacle if contact else no_obstacle(),
     )  # fmt: skip
-    assert diagnostics[0, 2] == -1
-    assert diagnostics[0, 0] <= 1e-10
-    assert not inside_closed_surface(x[0, 1:], data["shell_end"], faces).any()
+    return x[0], diagnostics[0], data["shell_end"]
+
+
+def test_a_fringe_tentacle_pressed_under_the_margin_slides_along_it() -> None:
+    """One of `moon-jelly`'s fringe tentacles over the frame in which its margin re-opens over it
+    (t = 1.65-1.70 s; tests/data/README.md). Particles 3 and 4 are pushed into the wall above
+    the root in every substep. Held where they were pushed (the rounds before the planes of
+    Eq. T17), the projection pulled them back in: 2 particles inside after the frame, 2.2 mm
+    deep. Kept on the wall's tangent planes, the chain slides along the wall: none inside, the
+    lengths exact."""
+    x, diagnostics, shell_end = advance_recorded_frame("moon_jelly_fringe_under_the_margin", True)
+    faces = bell_faces(50)
+    assert diagnostics[2] == -1
+    assert diagnostics[0] <= 1e-10
+    assert not inside_closed_surface(x[1:], shell_end, faces).any()
     # and it is the wall that moved them: without the contact, particle 3 ends inside
-    y = data["positions"][None].copy()
-    w = data["velocities"][None].copy()
-    advance_frame(
-        y, w, data["root_positions"][:, None], data["root_velocities"][:, None],
-        data["root_directions"][:, None], data["curl_normals"][:, None], np.zeros_like(y),
-        data["flow"][:, None], model, medium, float(data["dt"]), diagnostics,
-        np.zeros((1, 0, 3)), no_obstacle(),
+    y, _, _ = advance_recorded_frame("moon_jelly_fringe_under_the_margin", False)
+    assert inside_closed_surface(y, shell_end, faces)[3]
+
+
+# A root beside the box's face x = 1, 10 mm out and 40 mm above its bottom, and its neighbour,
+# one spacing (30 mm) away at 45 degrees down and in, 11 mm inside x = 1 and 19 mm above the
+# bottom, through which it came in.
+ROOT_BESIDE_THE_BOX = np.array([1.01, 0.5, 0.04])
+ROUND_THE_CORNER = 0.03 * np.array([-1.0, 0.0, -1.0]) / np.sqrt(2.0)
+
+
+def test_a_push_beyond_the_roots_reach_stops_on_the_roots_segment() -> None:
+    """Eq. T16b. The particle's path came in through the box's bottom, but the bottom's plane
+    lies 40 mm from the root, beyond its 30 mm segment: no point of it can hold the particle
+    (the projection on it fails). It is put where its segment from the root meets the box, on
+    the face x = 1, whose plane is 10 mm from the root; a chain with a free first particle (no
+    prescribed root) keeps the push along its path."""
+    spacing = 0.03
+    root = ROOT_BESIDE_THE_BOX
+    x = np.array([root, root + ROUND_THE_CORNER])
+    old = x.copy()
+    old[1] = [0.97, 0.5, -0.005]  # below the bottom at the step's start
+    obstacle = shell_obstacle(BOX_VERTICES, BOX_VERTICES, BOX_FACES)
+    gap = CONTACT_GAP * spacing
+    out = obstacle.clearance + gap
+
+    def pushed(reach: float, first: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        y, normals = x.copy(), np.zeros((2, 3))
+        moved = push_out(
+            y, old, first, obstacle, 1.0, np.zeros(2, bool), np.empty((11, 3)), gap, normals, reach
+        )
+        assert moved == 1
+        return y[1], normals[1]
+
+    along_the_path, bottom = pushed(0.0)
+    np.testing.assert_allclose(bottom, [0.0, 0.0, -1.0], atol=1e-12)
+    path = (x[1] - old[1]) / np.linalg.norm(x[1] - old[1])
+    assert along_the_path[2] == pytest.approx(-out * path[2], rel=1e-9)  # stopped on its path
+    assert bottom @ (root - along_the_path) < -spacing  # the root 40 mm on the plane's far side
+    on_the_side, side = pushed(spacing)
+    np.testing.assert_allclose(side, [1.0, 0.0, 0.0], atol=1e-12)
+    # stopped short of the face along the segment, at 45 degrees to the face's normal
+    assert on_the_side[0] == pytest.approx(1.0 + out / np.sqrt(2.0), rel=1e-12)
+    direction = (x[1] - root) / np.linalg.norm(x[1] - root)
+    np.testing.assert_allclose(np.cross(on_the_side - root, direction), 0.0, atol=1e-15)
+    assert 0.0 < side @ (root - on_the_side) < spacing  # within the segment's reach
+    # The bottom's plane cannot hold it at its length; the side's can.
+    for y, normal in ((along_the_path, bottom), (on_the_side, side)):
+        chain = np.array([root, y])
+        edges, band, rhs, pushes = wall_work(2)
+        done = project_on_walls(
+            chain, np.array([0.0, 1.0]), spacing, 1e-10, 50, np.array([False, True]),
+            np.array([y, y]), np.array([normal, normal]), edges, band, rhs, pushes,
+        )  # fmt: skip
+        assert (done >= 0) == (normal is side)
+    # A chain without a prescribed root can move its particle 0 to the plane: no reach rule.
+    np.testing.assert_array_equal(pushed(spacing, first=0)[0], along_the_path)
+
+
+def test_a_chain_whose_root_is_beside_the_wall_is_pushed_round_it() -> None:
+    """The contact's rounds (Eq. T15-T17) on a chain of three particles hanging from the root
+    beside the box (above): particle 1 came in through the bottom, particle 2 hangs below it.
+    Put on the bottom (the push along its path), its plane out of the root's reach, the
+    projection fell back to holding it, and the lengths pulled it back into the box, towards the
+    root, in every round. Put where its segment from the root meets the side, it
+    slides down the side: no particle inside, the lengths exact, particle 1 on the side's
+    plane."""
+    spacing = 0.03
+    root = ROOT_BESIDE_THE_BOX
+    x = np.array([root, root + ROUND_THE_CORNER, root + ROUND_THE_CORNER + [0.0, 0.0, -spacing]])
+    old = x.copy()
+    old[1:] = [[0.97, 0.5, -0.005], [0.97, 0.5, -0.035]]  # below the bottom at the start
+    assert inside_closed_surface(x[1:], BOX_VERTICES, BOX_FACES).tolist() == [True, False]
+    obstacle = shell_obstacle(BOX_VERTICES, BOX_VERTICES, BOX_FACES)
+    particles = 3
+    rows = 2 * particles - 1
+    iterations = _keep_out(
+        x, old, 1, obstacle, 1.0, np.array([0.0, 1.0, 1.0]), spacing, 0, np.empty((2, 3)),
+        np.empty((4, 2)), np.zeros(particles, bool), np.empty(particles),
+        np.zeros(particles, bool), np.empty((11, 3)), np.zeros((4, particles, 3)),
+        np.empty((rows, 3)), np.empty(rows),
     )  # fmt: skip
-    assert inside_closed_surface(y[0], data["shell_end"], faces)[3]
+    assert iterations >= 0
+    np.testing.assert_allclose(np.linalg.norm(np.diff(x, axis=0), axis=1), spacing, rtol=1e-10)
+    assert not inside_closed_surface(x[1:], BOX_VERTICES, BOX_FACES).any()
+    assert x[1, 0] > 1.0  # on the side, outside
+    assert x[1, 0] - 1.0 < obstacle.clearance + CONTACT_GAP * spacing
+
+
+def test_a_fringe_tentacle_swept_round_the_rim_stays_out_of_it() -> None:
+    """One of `moon-jelly`'s fringe tentacles over the frame t = 9.40-9.45 s, as the bell, pressed
+    flat at the water's surface, turns its margin up past the root (tests/data/README.md): the
+    root passes from 29 mm below the drawn underside to 17 mm beside the rim's outer face, and
+    its first particle, which came in through the underside, is inside from the sixth of the
+    frame's 7 substeps. Put on the underside, whose plane then lies 36-45 mm from the root,
+    beyond its 30 mm segment, the projection could not hold it and the lengths pulled it back
+    in: particles 1 and 2 ended the frame inside, 3.5 and 1.9 mm deep (docs/figures.md, note
+    11). Put where its segment from the root meets the rim (Eq. T16b) none is inside, the lengths
+    exact and no projection failed; particle 1 lies 4.9 mm off the rim."""
+    x, diagnostics, shell_end = advance_recorded_frame("moon_jelly_fringe_round_the_rim", True)
+    faces = bell_faces(50)
+    assert diagnostics[2] == -1
+    assert diagnostics[0] <= 1e-10
+    assert not inside_closed_surface(x[1:], shell_end, faces).any()
+    spacing = 0.03
+    np.testing.assert_allclose(np.linalg.norm(np.diff(x, axis=0), axis=1), spacing, rtol=1e-9)
+    # Without the contact none would end the frame inside either (particle 1 3.4 mm out): it was
+    # the held projection that pulled particles 1 and 2 in.
+    y, _, _ = advance_recorded_frame("moon_jelly_fringe_round_the_rim", False)
+    assert not inside_closed_surface(y[1:], shell_end, faces).any()
 
 
 def test_a_projection_step_on_walls_is_the_dense_newton_step() -> None:
@@ -384,3 +494,22 @@ def test_a_wall_that_would_hold_a_particle_in_lets_it_go() -> None:
     )
     assert x[1, 2] > 0.5 + 0.01  # off the wall, not slid along it at z = 0.5
     assert not inside_closed_surface(x[1:], BOX_VERTICES, BOX_FACES).any()
+
+
+def test_a_fringe_tentacle_under_the_upturned_margin_stays_out_of_it() -> None:
+    """Another of `moon-jelly`'s fringe tentacles, over the frame t = 9.60-9.65 s (tests/data/
+    README.md): the margin, turned up, lies over the chain, and particle 3, which came in through
+    the underside, is inside in the frame's last three substeps. Put on the underside, whose plane
+    lay 88-94 mm from the root, beyond the 90 mm of chain between them, the projection could not
+    hold it and the lengths pulled it back in: 4.0 mm deep after the frame. Put where the line
+    from the root meets the wall (Eq. T16b, particle i within i spacings of the root) none is
+    inside and the lengths are exact; without the contact particle 3 ends inside."""
+    name = "moon_jelly_fringe_under_the_upturned_margin"
+    x, diagnostics, shell_end = advance_recorded_frame(name, True)
+    faces = bell_faces(50)
+    assert diagnostics[2] == -1
+    assert diagnostics[0] <= 1e-10
+    assert not inside_closed_surface(x[1:], shell_end, faces).any()
+    np.testing.assert_allclose(np.linalg.norm(np.diff(x, axis=0), axis=1), 0.03, rtol=1e-9)
+    y, _, _ = advance_recorded_frame(name, False)
+    assert inside_closed_surface(y, shell_end, faces)[3]

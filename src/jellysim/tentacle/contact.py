@@ -6,7 +6,9 @@ Here the bell's tissue is the closed shell every output draws (``bell/surface_ve
 ``bell/surface_faces``), moving linearly in time between the two frames around the step. After
 each substep's projection a particle whose centre lies inside the shell (an odd number of the
 shell's triangles above it, Eq. T15) is put back on the shell's surface where its path came in,
-or at the surface's nearest point where the wall came over it (Eq. T16); the kernel then projects
+or at the surface's nearest point where the wall came over it (Eq. T16), a particle of a chain
+with a prescribed root where the line from the root meets the surface if that tangent plane is
+out of the chain's reach from the root (Eq. T16b); the kernel then projects
 the chain's lengths again together with the wall's tangent plane at each particle put on it, so
 that the chain slides along the wall, in rounds (Eq. T17,
 :func:`jellysim.tentacle.kernels._keep_out`). The velocity from the displacement (Eq. T9) carries
@@ -33,6 +35,11 @@ RAY_NUDGE = (1.37e-9, 2.71e-9)
 # coordinates).
 CLEARANCE = 1.0e-5
 COORDINATE_CLEARANCE = 1.0e-6  # of the largest coordinate: 16 single-precision roundings
+# Of the chain's length from a prescribed root to a particle: a tangent plane farther than this
+# from the root is out of the particle's reach (Eq. T16b); nearer to the full length the chain
+# would stand almost straight along the plane's normal, where the projection's system (Eq. T17)
+# is close to singular.
+ROOT_REACH = 0.99
 
 
 class Obstacle(NamedTuple):
@@ -241,61 +248,95 @@ def push_out(
     scratch: np.ndarray,
     gap: float = 0.0,
     normals: np.ndarray | None = None,
+    reach: float = 0.0,
 ) -> int:
     """Put every particle ``first``.. of chain ``x`` (P, 3) that lies inside the shell at ``tau``
     back on its surface, the obstacle's clearance plus ``gap`` (m) outside (Eq. T16): where it was
-    outside at the
-    step's start ``old`` (P, 3), at the point where its path from there first meets the surface;
-    where the wall came over it, at the nearest point of the surface. Marks the particles moved in
-    ``pinned`` (P,) and returns their number; ``normals`` (P, 3), if given, receives each moved
-    particle's unit outward normal of the surface where it was put (the triangle's its path
-    crossed, or the direction from the particle to its nearest point), the wall's tangent plane
-    there being what :func:`jellysim.tentacle.kernels.project_on_walls` keeps it outside of.
-    ``scratch`` (11, 3) is work space."""
+    outside at the step's start ``old`` (P, 3), at the point where its path from there first meets
+    the surface; where the wall came over it, at the nearest point of the surface. With a
+    prescribed root (``first`` = 1) and ``reach`` (m, the chain's spacing) given, particle i is put
+    where the straight line from the root to it first meets the surface instead wherever the
+    wall's tangent plane at either point lies more than ``ROOT_REACH`` of i ``reach`` from the
+    root (Eq. T16b): no point of that plane is within the chain's length from the root to it,
+    so the chain could not hold it there. Marks the particles moved in ``pinned`` (P,) and
+    returns their number; ``normals`` (P, 3), if given, receives each moved particle's unit
+    outward normal of the surface where it was put (the triangle's its path or the line from
+    the root crossed, or the direction from the particle to its nearest point), the wall's
+    tangent plane there being what :func:`jellysim.tentacle.kernels.project_on_walls` keeps it
+    outside of. ``scratch`` (11, 3) is work space."""
     if obstacle.faces.shape[0] == 0:
         return 0
     corners = scratch[0:3]
     work = scratch[3:8]
     nearest = scratch[8]
-    best = scratch[9]
-    crossed = scratch[10]
+    best = scratch[9]  # where the particle is put
+    crossed = scratch[10]  # the surface's outward unit normal there
     moved = 0
     for i in range(first, x.shape[0]):
         p = x[i]
         if not _inside_box(p, obstacle) or not inside_shell(p, obstacle, tau, corners):
             continue
         a = old[i]
+        placed = False
         if not (_inside_box(a, obstacle) and inside_shell(a, obstacle, tau, corners)):
             # It moved in this step: stop it where its path meets the surface.
-            t = _first_crossing(a, p, obstacle, tau, corners, crossed)
-            length = math.sqrt((p[0] - a[0]) ** 2 + (p[1] - a[1]) ** 2 + (p[2] - a[2]) ** 2)
-            if t <= 1.0 and length > 0.0:
-                back = max(t - (obstacle.clearance + gap) / length, 0.0)
-                for k in range(3):
-                    best[k] = a[k] + back * (p[k] - a[k])
-                for k in range(3):
-                    x[i, k] = best[k]
-                    if normals is not None:
-                        normals[i, k] = crossed[k]
-                pinned[i] = True
-                moved += 1
+            placed = _stop_on_segment(a, p, obstacle, tau, gap, corners, best, crossed)
+        if not placed:
+            # The wall came over it: the nearest point of the surface.
+            best_d2 = math.inf
+            for f in range(obstacle.faces.shape[0]):
+                for corner in range(3):
+                    _vertex(obstacle, obstacle.faces[f, corner], tau, corners[corner])
+                d2 = _closest_on_triangle(p, corners, work, nearest)
+                if d2 < best_d2:
+                    best_d2 = d2
+                    best[:] = nearest
+            distance = math.sqrt(best_d2)
+            if not distance > 0.0:
                 continue
-        # The wall came over it: the nearest point of the surface.
-        best_d2 = math.inf
-        for f in range(obstacle.faces.shape[0]):
-            for corner in range(3):
-                _vertex(obstacle, obstacle.faces[f, corner], tau, corners[corner])
-            d2 = _closest_on_triangle(p, corners, work, nearest)
-            if d2 < best_d2:
-                best_d2 = d2
-                best[:] = nearest
-        distance = math.sqrt(best_d2)
-        if distance > 0.0:
             scale = 1.0 + (obstacle.clearance + gap) / distance
             for k in range(3):
-                if normals is not None:  # before x[i] (p) changes
-                    normals[i, k] = (best[k] - p[k]) / distance
-                x[i, k] = p[k] + scale * (best[k] - p[k])
-            pinned[i] = True
-            moved += 1
+                crossed[k] = (best[k] - p[k]) / distance
+                best[k] = p[k] + scale * (best[k] - p[k])
+        if first == 1 and reach > 0.0:
+            # Eq. T16b: a plane beyond the prescribed root's reach, i segments, cannot hold it.
+            height = 0.0
+            for k in range(3):
+                height += crossed[k] * (x[0, k] - best[k])
+            if abs(height) > ROOT_REACH * i * reach and not (
+                _inside_box(x[0], obstacle) and inside_shell(x[0], obstacle, tau, corners)
+            ):
+                _stop_on_segment(x[0], p, obstacle, tau, gap, corners, best, crossed)
+        for k in range(3):
+            x[i, k] = best[k]
+            if normals is not None:
+                normals[i, k] = crossed[k]
+        pinned[i] = True
+        moved += 1
     return moved
+
+
+@njit(cache=True)
+def _stop_on_segment(
+    a: np.ndarray,
+    b: np.ndarray,
+    obstacle: Obstacle,
+    tau: float,
+    gap: float,
+    corners: np.ndarray,
+    out: np.ndarray,
+    normal: np.ndarray,
+) -> bool:
+    """Where the segment from ``a`` (outside) to ``b`` (inside) first meets the shell at ``tau``,
+    the obstacle's clearance plus ``gap`` back towards ``a``, into ``out`` (3,), with the crossed
+    triangle's unit normal turned towards ``a`` into ``normal`` (3,); False (both untouched) if it
+    meets none."""
+    t = _first_crossing(a, b, obstacle, tau, corners, out)
+    length = math.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2)
+    if t > 1.0 or not length > 0.0:
+        return False
+    back = max(t - (obstacle.clearance + gap) / length, 0.0)
+    for k in range(3):
+        normal[k] = out[k]
+        out[k] = a[k] + back * (b[k] - a[k])
+    return True

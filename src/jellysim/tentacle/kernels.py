@@ -857,7 +857,8 @@ def _keep_out(
     wall_rhs: np.ndarray,
 ) -> int:
     """Push the chain ``x`` out of the bell's shell and restore its lengths, Eq. (T15-T17): up to
-    ``CONTACT_ROUNDS`` times, put the particles inside back on the surface (:func:`push_out`),
+    ``CONTACT_ROUNDS`` times, put the particles inside back on the surface (:func:`push_out`; the
+    root's neighbour within the root's reach, Eq. T16b),
     then project the lengths again with every particle pushed so far kept on the wall's tangent
     plane where it was put (:func:`project_on_walls`), so that the chain slides along the wall
     instead of being pulled back into it; a plane that holds its particle in rather than out is let
@@ -878,7 +879,8 @@ def _keep_out(
     pinned[:] = False
     for _round in range(CONTACT_ROUNDS):
         moved[:] = False  # this round's pushes
-        if push_out(x, old, first, obstacle, tau, moved, scratch, CONTACT_GAP * spacing, normals):
+        gap = CONTACT_GAP * spacing
+        if push_out(x, old, first, obstacle, tau, moved, scratch, gap, normals, spacing):
             for i in range(first, x.shape[0]):
                 if moved[i]:
                     pinned[i] = True
