@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 from hanging import hang
+from saddle import saddle_system
 
 from jellysim.tentacle.kernels import (
-    KKT_HALF_BANDWIDTH,
     KKT_PADDING,
     Medium,
     _band_ldlt_solve,
@@ -156,24 +156,8 @@ def test_lumped_masses():
 def test_banded_ldlt_solve_equals_dense_solve_on_a_saddle_point_system(n):
     # SPD block over 3 unknowns per particle, one multiplier after each particle (as assembled),
     # stored between KKT_PADDING zero rows before and after.
-    b = KKT_HALF_BANDWIDTH
-    rng = np.random.default_rng(1)
-    a = np.zeros((n, n))
-    for i in range(n):
-        for j in range(max(0, i - b), i + 1):
-            if i % 4 != 3 and j % 4 != 3:
-                a[i, j] = rng.uniform(-0.2, 0.2) if i != j else rng.uniform(4, 5)
-            elif i % 4 == 3 and j != i and j > i - 8:
-                a[i, j] = rng.uniform(-1, 1)
-    a = np.tril(a) + np.tril(a, -1).T
-    band = np.zeros((n + 2 * KKT_PADDING, b + 1))
-    for i in range(n):
-        for s in range(b + 1):
-            if i - s >= 0:
-                band[KKT_PADDING + i, s] = a[i, i - s]
-    rhs = rng.normal(size=n)
-    x = np.zeros(n + 2 * KKT_PADDING)
-    x[KKT_PADDING : KKT_PADDING + n] = rhs
+    a, band, x = saddle_system(np.random.default_rng(1), n)
+    rhs = x[KKT_PADDING : KKT_PADDING + n].copy()
     _band_ldlt_solve(band, np.empty(n + 2 * KKT_PADDING), x)
     np.testing.assert_allclose(
         x[KKT_PADDING : KKT_PADDING + n], np.linalg.solve(a, rhs), rtol=1e-10, atol=1e-12

@@ -5,6 +5,7 @@ vector")."""
 
 import numpy as np
 import pytest
+from saddle import saddle_system
 
 from jellysim.tentacle.contact import no_obstacle
 from jellysim.tentacle.kernels import (
@@ -20,27 +21,6 @@ from jellysim.tentacle.lanes import LANES, band_ldlt_solve_lanes
 from jellysim.tentacle.model import build_chain_model, rest_second_differences
 
 B = KKT_HALF_BANDWIDTH
-
-
-def saddle_system(rng, n):
-    """A saddle-point system as the kernel assembles it (three unknowns a particle, then its
-    multiplier), in padded band storage, and a right-hand side."""
-    a = np.zeros((n, n))
-    for i in range(n):
-        for j in range(max(0, i - B), i + 1):
-            if i % 4 != 3 and j % 4 != 3:
-                a[i, j] = rng.uniform(-0.2, 0.2) if i != j else rng.uniform(4, 5)
-            elif i % 4 == 3 and j != i and j > i - 8:
-                a[i, j] = rng.uniform(-1, 1)
-    a = np.tril(a) + np.tril(a, -1).T
-    band = np.zeros((n + 2 * KKT_PADDING, B + 1))
-    for i in range(n):
-        for s in range(B + 1):
-            if i - s >= 0:
-                band[KKT_PADDING + i, s] = a[i, i - s]
-    rhs = np.zeros(n + 2 * KKT_PADDING)
-    rhs[KKT_PADDING : KKT_PADDING + n] = rng.normal(size=n)
-    return a, band, rhs
 
 
 @pytest.mark.parametrize("n", [24, 236])
