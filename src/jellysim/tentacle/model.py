@@ -220,6 +220,21 @@ def _perpendicular(candidate: np.ndarray, direction: np.ndarray, out: np.ndarray
 
 
 @njit(cache=True)
+def _first_perpendicular(
+    outward: np.ndarray,
+    axis: np.ndarray,
+    x_axis: np.ndarray,
+    direction: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """:func:`curl_normals`' choice for one root: the first of ``outward``, the bell ``axis`` and
+    the world ``x_axis`` that :func:`_perpendicular` can make perpendicular to ``direction``."""
+    if not _perpendicular(outward, direction, out):
+        if not _perpendicular(axis, direction, out):
+            _perpendicular(x_axis, direction, out)
+
+
+@njit(cache=True)
 def _curl_normals(
     directions: np.ndarray, outward: np.ndarray, axes: np.ndarray, normals: np.ndarray
 ) -> None:
@@ -227,11 +242,7 @@ def _curl_normals(
     x_axis = np.array([1.0, 0.0, 0.0])
     for s in range(directions.shape[0]):
         for t in range(directions.shape[1]):
-            d = directions[s, t]
-            n = normals[s, t]
-            if not _perpendicular(outward[s, t], d, n):
-                if not _perpendicular(axes[s], d, n):
-                    _perpendicular(x_axis, d, n)
+            _first_perpendicular(outward[s, t], axes[s], x_axis, directions[s, t], normals[s, t])
 
 
 def carried_curl_normals(
@@ -280,11 +291,7 @@ def _carried_curl_normals(
             carried[0] = (co * u0 + (c1 * u2 - c2 * u1)) + scale * c0
             carried[1] = (co * u1 + (c2 * u0 - c0 * u2)) + scale * c1
             carried[2] = (co * u2 + (c0 * u1 - c1 * u0)) + scale * c2
-            d = directions[s, t]
-            n = normals[s, t]
-            if not _perpendicular(carried, d, n):
-                if not _perpendicular(axes[s], d, n):
-                    _perpendicular(x_axis, d, n)
+            _first_perpendicular(carried, axes[s], x_axis, directions[s, t], normals[s, t])
 
 
 def medium_for(scene: Scene) -> Medium:
