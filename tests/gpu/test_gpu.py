@@ -109,6 +109,35 @@ def test_the_soft_bell_rises_as_on_the_cpu(tmp_path) -> None:
     assert rises["cuda"] == pytest.approx(rises["cpu"], rel=0.03)
 
 
+def test_the_presets_bell_springs_match_the_cpu() -> None:
+    """moon-jelly's bell (1,100 particles, 14,000 springs, implicit, tapered muscle) with its
+    particles moved and stirred: the GPU's spring force density (assembled rows, Jacobi CG) is
+    the CPU's (matrix-free, unpreconditioned CG) to 1e-9 of the largest, both solved to 1e-10 of
+    |b| (tests/unit/test_fluid_gpu.py says why the bound holds), over a whole pulse's
+    activations; the explicit force agrees to 1e-12 (the GPU may contract to FMAs)."""
+    from jellysim import load_scene
+    from jellysim.coupling.bell_in_fluid import BellInFluid
+
+    for integration in ("implicit", "explicit"):
+        options = {"bell.spring_integration": integration}
+        cpu = BellInFluid(load_scene("moon-jelly", options))
+        on_gpu = BellInFluid(load_scene("moon-jelly", {**options, "fluid.device": "cuda"}))
+        rows = cpu.bell_rows
+        state = cpu.solver.state_arrays()
+        rng = np.random.default_rng(11)
+        state["velocity"][rows] = rng.normal(0.0, 0.2, (rows.stop - rows.start, 3))
+        state["position"][rows] += rng.normal(0.0, 0.005, (rows.stop - rows.start, 3))
+        cpu.solver.restore(state)
+        on_gpu.solver.restore(state)
+        bound = 1e-9 if integration == "implicit" else 1e-12
+        for time in np.linspace(0.0, 2.0, 9):
+            expected = cpu._spring_force_density(float(time), 4e-3).copy()
+            got = on_gpu._spring_force_density(float(time), 4e-3).copy_to_host()
+            scale = np.abs(expected).max()
+            assert scale > 0.0
+            np.testing.assert_allclose(got, expected, rtol=0.0, atol=bound * scale)
+
+
 def _spheric_scene(folder, spacing: float, duration: float, fps: float, device: str = "cuda"):
     """spheric-test2 at ``spacing`` for ``duration`` s on ``device``, the pressure solved to
     1e-12, with two pressure probes more that the water presses from the start: on the

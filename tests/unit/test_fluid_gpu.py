@@ -129,13 +129,20 @@ def test_gpu_step_matches_cpu_with_collisions_and_viscosity() -> None:
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_gpu_step_matches_cpu(case: str) -> None:
+    """Each case's steps on both paths. In "standard-2d" an external force density acts too,
+    a shear up to half of gravity's (each row its own), given to the GPU as a device array (as
+    the soft bell's springs give theirs) and to the CPU as a host array."""
     cpu, device, kinds, steps = _pair(case)
     fluid = kinds == FLUID
+    force = None
+    if case == "standard-2d":
+        force = np.zeros_like(cpu.position)  # N/m3
+        force[:, 0] = 5e3 * cpu.position[:, 1] / cpu.position[:, 1].max()
     for _ in range(steps):
         dt = cpu.stable_dt()
         assert device.stable_dt() == pytest.approx(dt, rel=1e-14)
-        cpu_stats = cpu.step(dt)
-        gpu_stats = device.step(dt)
+        cpu_stats = cpu.step(dt, force)
+        gpu_stats = device.step(dt, None if force is None else gpu.cuda.to_device(force))
         assert gpu_stats.surface == cpu_stats.surface
         assert gpu_stats.residual <= 1e-12
         g_dt = 9.81 * dt
@@ -148,6 +155,19 @@ def test_gpu_step_matches_cpu(case: str) -> None:
     # the comparison is of steps that did something: the water moved, under a pressure
     assert np.abs(device.velocity[fluid]).max() > 0.5 * g_dt
     assert largest > 0.0
+
+
+def test_a_device_force_of_the_wrong_shape_is_refused_before_the_step() -> None:
+    """An external force given on the GPU (the soft bell's springs) is checked as a host one:
+    a wrong shape is a ValueError, and the state is not touched."""
+    _, device, _, _ = _pair("standard-2d")
+    before = device.state_arrays()
+    force = gpu.cuda.to_device(np.zeros((device.n - 1, 2)))
+    with pytest.raises(ValueError, match="external_force must be"):
+        device.step(1e-4, force)
+    after = device.state_arrays()
+    for name, value in before.items():
+        np.testing.assert_array_equal(after[name], value)
 
 
 def test_gpu_runs_are_the_same_to_the_bit_and_resume_across_devices() -> None:
@@ -265,36 +285,88 @@ def test_no_gpu_is_an_input_error(tmp_path) -> None:
     assert not out.exists()
 
 
-def test_the_soft_bell_drives_water_on_the_gpu() -> None:
-    """The soft bell's springs stay on the CPU and read the bell's rows from the GPU solver:
-    from one state, the force density each step gives the water is the CPU run's, and the
-    frame's record of the bell is the same (the coupling's glue; the simulator is too slow for
-    a pulse of it: three pulses on a GPU are in docs/performance.md)."""
+def _bell_pair(options: dict[str, object]):
+    """The tests' coarse moon jelly (tests/scenes.py SWIM) with ``options``, its water on the CPU
+    and on the GPU from one state: the bell's particles moved by up to a few hundredths of l0
+    and stirred, so that every spring is stretched or compressed and K v is not zero."""
     import scenes
 
     from jellysim import load_scene
     from jellysim.coupling.bell_in_fluid import BellInFluid
 
-    overrides = {**scenes.SWIM, "duration": 0.2}
+    overrides = {**scenes.SWIM, "duration": 0.2, **options}
     cpu = BellInFluid(load_scene("moon-jelly", overrides))
     on_gpu = BellInFluid(load_scene("moon-jelly", {**overrides, "fluid.device": "cuda"}))
     assert isinstance(on_gpu.solver, gpu.GPUSolver) and on_gpu.on_gpu
+    rows = cpu.bell_rows
     state = cpu.solver.state_arrays()
     rng = np.random.default_rng(7)
-    state["velocity"][cpu.bell_rows] = rng.normal(
-        0.0, 0.05, (cpu.bell_rows.stop - cpu.bell_rows.start, 3)
-    )
+    state["velocity"][rows] = rng.normal(0.0, 0.05, (rows.stop - rows.start, 3))
+    state["position"][rows] += rng.normal(0.0, 0.01, (rows.stop - rows.start, 3))
     cpu.solver.restore(state)
     on_gpu.solver.restore(state)
-    expected = cpu._spring_force_density(0.3, 1e-3).copy()
-    got = on_gpu._spring_force_density(0.3, 1e-3)
-    assert np.abs(expected[cpu.bell_rows]).max() > 0.0
+    return cpu, on_gpu
+
+
+def test_the_soft_bells_explicit_springs_on_the_gpu_are_the_cpus() -> None:
+    """Explicit springs (Eq. B8) with a tapered muscle mid-contraction (Eq. B9) and the
+    tentacles' reaction (Eq. S2) on the water and the bell: the GPU's force density is the CPU's
+    to the bit (the same operations in the same order; the simulator contracts no FMAs), on the
+    bell's rows and the water's, and the frame's record of the bell is the same. With the
+    reaction gone, the water's rows are free again."""
+    cpu, on_gpu = _bell_pair({"bell.spring_integration": "explicit", "bell.muscle_taper": 0.5})
+    reaction = np.random.default_rng(3).normal(0.0, 50.0, cpu.solver.position.shape)
+    cpu.reaction = reaction.copy()  # flow.two_way's array, as take_reaction leaves it
+    on_gpu.reaction = np.zeros_like(reaction)
+    on_gpu.set_reaction(reaction)
+    time = 0.3  # the contraction's middle: 0 < a < 1
+    assert 0.0 < cpu.body.activation(time) < 1.0
+    expected = cpu._spring_force_density(time, 1e-3).copy()
+    got = on_gpu._spring_force_density(time, 1e-3).copy_to_host()
+    rows = cpu.bell_rows
+    assert np.abs(expected[rows] - reaction[rows]).max() > 1e3  # N/m3: the springs pull
     np.testing.assert_array_equal(got, expected)
+    on_gpu._gpu_springs.set_reaction(None)
+    cpu.reaction = None
+    free = on_gpu._spring_force_density(time, 1e-3).copy_to_host()
+    np.testing.assert_array_equal(free[rows], cpu._spring_force_density(time, 1e-3)[rows])
+    assert not np.any(free[: rows.start]) and not np.any(free[rows.stop :])
     cpu.record(0)
     on_gpu.record(0)
     np.testing.assert_array_equal(on_gpu.position, cpu.position)
     np.testing.assert_array_equal(on_gpu.velocity, cpu.velocity)
     assert on_gpu.solver.constants == cpu.solver.constants
+
+
+def test_the_soft_bells_implicit_springs_on_the_gpu_match_the_cpus() -> None:
+    """Linearised backward Euler (spring_integration = "implicit", the presets'): the GPU
+    assembles ``(m I - dt^2 K) dv = dt (F + dt K v)`` in rows and solves it with the pressure's
+    Jacobi CG; the CPU applies K matrix-free in an unpreconditioned CG. Both stop at a relative
+    residual of 1e-10 (IMPLICIT_TOLERANCE), and the matrix is m I plus a positive semi-definite
+    part, so each solution is within 1e-10 |b| / m of the exact one: the force densities agree
+    to 1e-9 of the largest (measured: 7e-12 at dt = 0.01 s). The water's rows stay free."""
+    cpu, on_gpu = _bell_pair({"bell.spring_integration": "implicit"})
+    expected = cpu._spring_force_density(0.3, 1e-2).copy()
+    got = on_gpu._spring_force_density(0.3, 1e-2).copy_to_host()
+    rows = cpu.bell_rows
+    scale = np.abs(expected[rows]).max()
+    assert scale > 1e3  # N/m3
+    np.testing.assert_allclose(got, expected, rtol=0.0, atol=1e-9 * scale)
+    assert not np.any(got[: rows.start]) and not np.any(got[rows.stop :])
+
+
+def test_the_gpus_implicit_springs_fail_as_the_cpus() -> None:
+    """A bell particle with a non-finite velocity: the GPU's implicit solve stops and says so
+    as the CPU's does (SimulationUnstable), instead of giving the water NaN forces."""
+    from jellysim.errors import SimulationUnstable
+
+    cpu, on_gpu = _bell_pair({"bell.spring_integration": "implicit"})
+    state = cpu.solver.state_arrays()
+    state["velocity"][cpu.bell_rows.start + 5] = np.nan
+    for coupling in (cpu, on_gpu):
+        coupling.solver.restore(state)
+        with pytest.raises(SimulationUnstable, match="implicit spring solve"):
+            coupling._spring_force_density(0.3, 1e-3)
 
 
 def test_a_run_resumes_on_the_other_device() -> None:

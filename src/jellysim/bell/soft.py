@@ -182,6 +182,12 @@ class SoftBell:
             np.add.at(self._passive_total, ends, self.stiffness * (1.0 - muscle_share))
             np.add.at(self._muscle_total, ends, self.stiffness * muscle_share)
 
+    @property
+    def muscle_weight(self) -> np.ndarray | None:
+        """Each muscle spring's share of the contraction (Eq. B9, ``muscle_taper``), in the
+        order of the muscle springs; None where every share is 1."""
+        return self._muscle_weight
+
     def activation(self, time: float) -> float:
         """Muscle activation a(t) in [0, 1]: 0 relaxed, 1 fully contracted (Eq. B9)."""
         c, _ = contraction_waveform(

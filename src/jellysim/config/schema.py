@@ -621,7 +621,7 @@ class Fluid:
         choices=("cpu", "cuda"),
         doc="where the fluid is stepped: 'cpu' (the CPU cores), or 'cuda' (an NVIDIA GPU, "
         "`pip install jellysim[cuda]`; the pressure by Jacobi-preconditioned CG whatever "
-        "fluid.solver says; a soft bell's springs stay on the CPU; docs/fluid.md)",
+        "fluid.solver says; a soft bell's springs and muscle on the GPU too; docs/fluid.md)",
     )
     coarse_cell: float = param(
         4.0,

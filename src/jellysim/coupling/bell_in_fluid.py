@@ -75,7 +75,7 @@ class BellInFluid:
             [np.arange(len(water)), np.arange(self.bell_rows.stop, len(order))]
         )
         params = water_parameters(scene)
-        # the water on the CPU or the GPU (fluid.device); the springs on the CPU either way
+        # the water on the CPU or the GPU (fluid.device); the springs beside it
         self.solver: Any = make_solver(params, positions[order], kinds[order], scene.fluid.device)
         self.on_gpu = scene.fluid.device == "cuda"
         l0 = params.l0
@@ -111,13 +111,22 @@ class BellInFluid:
         self.reaction: np.ndarray | None = (
             np.zeros_like(self.solver.position) if scene.flow.two_way else None
         )
+        # On the GPU the springs and muscle run there too: a step moves no particle array.
+        self._gpu_springs: Any = None
+        if self.on_gpu:
+            from jellysim.bell.gpu_springs import GPUSprings
+
+            self._gpu_springs = GPUSprings(self.body, self.solver, self.bell_rows, l0**3)
 
     @property
     def water_particles(self) -> int:
         return self.bell_rows.start
 
     def prepare(self) -> None:
-        """Compile the springs' and the fluid's kernels on throw-away copies."""
+        """Compile the springs' and the fluid's kernels on throw-away copies (the GPU's
+        compile in the first step)."""
+        if self.on_gpu:
+            return
         rows = self.bell_rows
         self.body.step_force(
             self.solver.position[rows].copy(),
@@ -126,12 +135,14 @@ class BellInFluid:
             1e-3,
             self._bell_force.copy(),
         )
-        if not self.on_gpu:  # the GPU's kernels compile in the first step
-            compile_on_copy(self.solver, self._force)
+        compile_on_copy(self.solver, self._force)
 
-    def _spring_force_density(self, time: float, dt: float) -> np.ndarray:
+    def _spring_force_density(self, time: float, dt: float) -> Any:
         """The bell's springs and muscle over the step from ``time`` (Eq. B8-B9), as the force
-        density (N/m3) of the explicit stage on the bell's rows (§4.2.2)."""
+        density (N/m3) of the explicit stage on the bell's rows (§4.2.2): a host array, or on
+        the GPU a device array."""
+        if self._gpu_springs is not None:
+            return self._gpu_springs.force_density(time, dt)
         rows, solver = self.bell_rows, self.solver
         self.body.step_force(
             solver.position[rows], solver.velocity[rows], time, dt, self._bell_force
@@ -153,9 +164,17 @@ class BellInFluid:
         momentum = spread_reaction(
             points, impulses, solver.position[fluid], solver.constants.re_number_density
         )
+        reaction = np.zeros_like(solver.position)
+        reaction[fluid] = momentum / (frame_dt * self._cell_volume)
+        self.set_reaction(reaction)
+
+    def set_reaction(self, reaction: np.ndarray) -> None:
+        """The tentacles' reaction (N, D) N/m3 that acts over the next frame (flow.two_way; a
+        checkpoint's, on resuming), on the GPU too where the water is there."""
         assert self.reaction is not None
-        self.reaction[:] = 0.0
-        self.reaction[fluid] = momentum / (frame_dt * self._cell_volume)
+        self.reaction[:] = reaction
+        if self._gpu_springs is not None:
+            self._gpu_springs.set_reaction(self.reaction)
 
     def advance(self, end: float, frame_dt: float) -> None:
         """Water and bell together to the time ``end`` (s), in MPS steps of at most the stable

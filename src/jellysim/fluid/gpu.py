@@ -920,6 +920,17 @@ class GPUSolver:
         return self._download("position", self._d_position)
 
     @property
+    def device_position(self) -> Any:
+        """The positions (N, D) m on the GPU, for kernels beside the solver's (the soft bell's
+        springs): read them, write only through :meth:`restore`."""
+        return self._d_position
+
+    @property
+    def device_velocity(self) -> Any:
+        """The velocities (N, D) m/s on the GPU, as :attr:`device_position`."""
+        return self._d_velocity
+
+    @property
     def velocity(self) -> np.ndarray:
         return self._download("velocity", self._d_velocity)
 
@@ -1020,10 +1031,15 @@ class GPUSolver:
             height = float(high + minus_low) + p.l0
         return min(step_limits(p, speed, height, external_acceleration).values(), default=math.inf)
 
-    def step(self, dt: float, external_force: np.ndarray | None = None) -> StepStats:
-        """Advance the fluid by ``dt`` (s) on the GPU, as :meth:`MPSSolver.step`."""
+    def step(self, dt: float, external_force: Any = None) -> StepStats:
+        """Advance the fluid by ``dt`` (s) on the GPU, as :meth:`MPSSolver.step`;
+        ``external_force`` (N, D) N/m3 is a host array (uploaded) or a device array (read
+        where it is)."""
         p = self.params
         k, n, g = self.k, self.n, _grid(self.n)
+        if external_force is not None and external_force.shape != (n, p.dim):
+            # the kernel reads row i of it, unchecked
+            raise ValueError(f"external_force must be ({n}, {p.dim}), not {external_force.shape}")
         self._host.clear()
         stats = StepStats()
         timer = PhaseTimer(stats.seconds)
@@ -1051,19 +1067,21 @@ class GPUSolver:
         with timer("explicit"):
             self._start_position.copy_to_device(self._d_position)
             has_external = external_force is not None
-            if has_external:
+            external = self._external
+            if has_external and hasattr(external_force, "copy_to_host"):
+                external = external_force  # already on the GPU (the soft bell's springs)
+            elif has_external:
                 force = np.ascontiguousarray(external_force, dtype=np.float64)
-                if force.shape != (n, dim):  # the kernel reads row i of it, unchecked
-                    raise ValueError(f"external_force must be ({n}, {dim}), not {force.shape}")
                 if self._external.shape != force.shape:
                     self._external = self._cuda.to_device(force)
                 else:
                     self._external.copy_to_device(force)
+                external = self._external
             viscous = p.kinematic_viscosity * 2.0 * dim / (ref_lap.lambda_ * ref_lap.n0)
             k["explicit_stage"][g, BLOCK](
                 self._d_position, self._d_velocity, self._d_kind, self._d_alive, self._index,
                 self._distance, self._list_count, re_lap, viscous, self._d_gravity,
-                self._external, has_external, p.density, dt, self._scratch_position,
+                external, has_external, p.density, dt, self._scratch_position,
                 self._scratch_velocity,
             )  # fmt: skip
             k["collision"][g, BLOCK](

@@ -180,7 +180,7 @@ class SoftBellSimulation(Simulation):
                 frame, {k[10:]: v for k, v in state.items() if k.startswith("tentacles_")}
             )
         if self.coupling.reaction is not None:
-            self.coupling.reaction[:] = state["coupling_reaction"]
+            self.coupling.set_reaction(state["coupling_reaction"])
 
     def finish(self) -> None:
         report(self.coupling.solver, self.coupling.stats)
