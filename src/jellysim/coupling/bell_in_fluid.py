@@ -25,7 +25,7 @@ from jellysim.coupling.water_at import spread_reaction
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid.frames import FrameStats, advance_to, compile_on_copy
 from jellysim.fluid.geometry import FLUID
-from jellysim.fluid.mps import MPSParameters
+from jellysim.fluid.mps import MPSParameters, PhaseTimer
 from jellysim.fluid.setup import fluid_particles, make_solver, mps_parameters
 from jellysim.tentacle.layout import root_layout
 
@@ -140,7 +140,12 @@ class BellInFluid:
     def _spring_force_density(self, time: float, dt: float) -> Any:
         """The bell's springs and muscle over the step from ``time`` (Eq. B8-B9), as the force
         density (N/m3) of the explicit stage on the bell's rows (§4.2.2): a host array, or on
-        the GPU a device array."""
+        the GPU a device array. Its wall time is the run's "springs" phase (the log's time
+        per phase; on the GPU the implicit solve's, which waits for its answer)."""
+        with PhaseTimer(self.stats.seconds)("springs"):
+            return self._springs(time, dt)
+
+    def _springs(self, time: float, dt: float) -> Any:
         if self._gpu_springs is not None:
             return self._gpu_springs.force_density(time, dt)
         rows, solver = self.bell_rows, self.solver
