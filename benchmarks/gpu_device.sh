@@ -1,33 +1,61 @@
 #!/usr/bin/env bash
 # The GPU path measured on a machine with an NVIDIA GPU and 16 cores (issue 28;
-# docs/performance.md): the GPU tests, bench_gpu.py (GPU steps/s at 54,000, 57,600 and
-# 1,024,000 fluid particles beside the CPU on 16 threads, and the two paths' water compared;
-# then SPHERIC Test 2 at 1,121,729 fluid particles with its pressure probes read each step),
-# the 3-D tank's CPU step on 1-16 threads (bench_fluid.py), and dam-break-2d run on the GPU
-# and plotted against Martin & Moyce.
-#   bash benchmarks/gpu_device.sh OUTDIR
+# docs/performance.md), in parts, most wanted first:
+#   tests      tests/gpu (the CPU comparisons at full size, two runs bit for bit, the coarse
+#              space's iterations, the preset bell's springs; the slow ones are left out)
+#   steps      bench_gpu.py: GPU steps/s at 57,600 (moon-jelly's water), 54,000 (tank-3d) and
+#              1,024,000 fluid particles beside the CPU on 16 threads, the two paths' water
+#              compared after 20 steps
+#   moon-jelly the moon-jelly preset's bell and water (no tentacles) for three pulses on the GPU
+#              (issue 28's 30 s), the springs on the GPU; per pulse contraction and rise
+#   spheric    SPHERIC Test 2 at 1,121,729 fluid particles, its pressure probes read each step
+#   threads    the 3-D tank's CPU step on 16, 8, 4, 2 and 1 threads (bench_fluid.py)
+#   dam-break  dam-break-2d run on the GPU and plotted against Martin & Moyce
+#   fine       moon-jelly-fine for three pulses on the GPU (its test in tests/gpu, --runslow;
+#              issue 28's 10 minutes: a session of its own)
+#   bash benchmarks/gpu_device.sh OUTDIR [PART ...]   (no part: tests steps moon-jelly, about
+#   9 minutes at most, which a 15-minute device session holds with its start)
 # Each part has a time limit, so that one stuck part leaves the others' figures.
 set -u
 out=${1:-/tmp/gpu-device}
+shift || true
+parts=${*:-tests steps moon-jelly}
 mkdir -p "$out"
 py=${PYTHON:-python3}
 export PYTHONUNBUFFERED=1
 say() { echo "$@" | tee -a "$out/log"; }
-say "== machine"
+say "== machine (parts: $parts)"
 { nproc; lscpu | grep -E "Model name|^CPU\(s\)"; nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv
   $py -c "import numba, numpy, sys; print('python', sys.version.split()[0], 'numba', numba.__version__, 'numpy', numpy.__version__)"
   $py -m pip show numba-cuda 2>/dev/null | grep -E "^Version"; } 2>&1 | tee -a "$out/log"
-say "== bench_gpu.py"
-timeout 220 $py benchmarks/bench_gpu.py --case tank-3d --case moon-jelly-water --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 2>&1 | tee -a "$out/log"
-say "== bench_gpu.py --case spheric-test2-million"
-timeout 150 $py benchmarks/bench_gpu.py --case spheric-test2-million --steps 20 2>&1 | tee -a "$out/log"
-say "== CPU threads: bench_fluid.py --case tank-3d"
-for threads in ${THREADS-16 8 4 2 1}; do
-  timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
+for part in $parts; do
+  case $part in
+    tests)
+      say "== tests/gpu"
+      JELLYSIM_TEST_GPU=1 timeout 240 $py -m pytest -q -p no:cacheprovider tests/gpu 2>&1 | tail -15 | tee -a "$out/log" ;;
+    steps)
+      say "== bench_gpu.py"
+      timeout 220 $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 2>&1 | tee -a "$out/log" ;;
+    moon-jelly)
+      say "== moon-jelly, three pulses on the GPU (bell_pulses.py --full --pulses 3 --no-tentacles)"
+      timeout 150 $py benchmarks/bell_pulses.py --full --pulses 3 --no-tentacles --set fluid.device='"cuda"' 2>&1 | tail -8 | tee -a "$out/log" ;;
+    spheric)
+      say "== bench_gpu.py --case spheric-test2-million"
+      timeout 150 $py benchmarks/bench_gpu.py --case spheric-test2-million --steps 20 2>&1 | tee -a "$out/log" ;;
+    threads)
+      say "== CPU threads: bench_fluid.py --case tank-3d"
+      for threads in ${THREADS-16 8 4 2 1}; do
+        timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
+      done ;;
+    dam-break)
+      say "== jellysim run dam-break-2d --device cuda"
+      ( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"
+      timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log" ;;
+    fine)
+      say "== moon-jelly-fine, three pulses on the GPU"
+      JELLYSIM_TEST_GPU=1 timeout 720 $py -m pytest -q -p no:cacheprovider --runslow tests/gpu -k fine 2>&1 | tail -15 | tee -a "$out/log" ;;
+    *)
+      say "unknown part: $part (tests steps moon-jelly spheric threads dam-break fine)" ;;
+  esac
 done
-say "== tests/gpu"
-JELLYSIM_TEST_GPU=1 timeout 200 $py -m pytest -q -p no:cacheprovider tests/gpu 2>&1 | tail -15 | tee -a "$out/log"
-say "== jellysim run dam-break-2d --device cuda"
-( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"
-timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log"
 say "== done"

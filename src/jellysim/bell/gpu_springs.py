@@ -355,7 +355,7 @@ class GPUSprings:
         args = (
             self._index, self._count, self._coefficient, self._diagonal, self._inverse_diagonal,
             self._b, self._x, self._r, self._z, self._d, self._q, self._partial,
-            IMPLICIT_TOLERANCE**2, MAX_ITERATIONS, self._out,
+            IMPLICIT_TOLERANCE**2, MAX_ITERATIONS, self._out, *gpu.no_coarse_space(),
         )  # fmt: skip
         kernel = gpu._kernels()["conjugate_gradient"]
         if self._blocks == 0:

@@ -620,8 +620,9 @@ class Fluid:
         kind="choice",
         choices=("cpu", "cuda"),
         doc="where the fluid is stepped: 'cpu' (the CPU cores), or 'cuda' (an NVIDIA GPU, "
-        "`pip install jellysim[cuda]`; the pressure by Jacobi-preconditioned CG whatever "
-        "fluid.solver says; a soft bell's springs and muscle on the GPU too; docs/fluid.md)",
+        "`pip install jellysim[cuda]`; the pressure by CG with Jacobi, plus a coarse "
+        "correction where fluid.solver is 'deflated'; a soft bell's springs and muscle on the "
+        "GPU too; docs/fluid.md)",
     )
     coarse_cell: float = param(
         4.0,

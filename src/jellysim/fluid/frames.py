@@ -64,6 +64,7 @@ def advance_to(
     SimulationUnstable. ``after_step`` (if given) is called with each step's dt (s) after it
     (the probes' frame means)."""
     iterations, residual, steps = 0, 0.0, 0
+    solver.begin_frame()
     while solver.time < end - 1e-12 * frame_dt:
         limit = min(solver.stable_dt(), dt_limit)
         if end - solver.time > MAX_STEPS_PER_FRAME * limit:

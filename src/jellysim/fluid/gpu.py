@@ -3,8 +3,10 @@
 
 The same equations as the CPU path (docs/theory/fluid.md, Eq. F1-F13), every option of
 :class:`~jellysim.fluid.mps.MPSParameters` but the pressure solver: the CPU's IC(0) and its
-coarse-space deflation (a sparse direct coarse solve) do not suit a GPU, so the pressure is
-solved by CG preconditioned by Jacobi, whatever ``solver`` says (docs/decisions.md). The
+coarse-space deflation (a sparse direct coarse solve each iteration) do not suit a GPU. The
+pressure is solved by CG preconditioned by Jacobi, and with ``solver = "deflated"`` (every
+preset's) by Jacobi plus a coarse correction on aggregates, ``M^-1 r = D^-1 r + Z E^-1 Z^T r``
+(Eq. F12b), E^-1 dense on the GPU and made on the host once a frame (docs/decisions.md). The
 neighbour lists are of fixed width: ``width`` slots a particle (grown, and the search repeated,
 when a particle has more neighbours), in the order of the cells around it and of particle
 index within a cell, so that each particle sums its neighbours in one fixed order.
@@ -31,6 +33,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 
 from jellysim.fluid.geometry import DUMMY, FLUID, WALL
 from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT
@@ -70,6 +73,23 @@ BLOCK = 128
 # lattice within the search radius, plus a few (compressed water and collisions give more;
 # the search grows the width and runs again when some particle has more).
 WIDTH_FACTOR = 1.4
+
+# The two-level preconditioner (``fluid.solver = "deflated"`` on the GPU): aggregates are blocks
+# of k x k (x k) search cells, k the nearest to ``coarse_cell`` l0 and grown until there are at
+# most one per COARSE_PARTICLES particles and COARSE_LARGEST in all (E^-1 is dense on the GPU,
+# factored on the host: more aggregates save iterations and cost a larger factorisation). E^-1
+# is made anew at each frame's first solve (so that a resumed run solves as the run), when a
+# solve takes more than COARSE_STALE times the iterations of the first solve with it (plus two),
+# or after COARSE_REFRESH steps: an E^-1 some steps old costs a few iterations (measured on the
+# CPU: 39 -> 44 after 50 steps of tank-3d), its making a download, a factorisation on the host
+# and an upload (docs/decisions.md). Iteration counts are deterministic, so the refreshes fall
+# on the same steps in two runs.
+COARSE_LARGEST = 2500
+COARSE_PARTICLES = 200
+COARSE_REFRESH = 200
+COARSE_STALE = 1.25
+# The dense product with E^-1 in this many chunks of columns, so that m x CHUNKS threads share it.
+COARSE_CHUNKS = 32
 
 _KERNELS: dict[str, Any] | None = None
 
@@ -448,6 +468,122 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
             b[i] = source_scale * ((density_star[i] - n0) / n0)
         x[i] = pressure[i]
 
+    # ------------------------------------------------------------ the coarse space (two-level)
+
+    @cuda.jit(device=True)
+    def coarse_block(c, shape, k, coarse_shape):
+        """The aggregate of search cell ``c``: the block of k x k (x k) cells it lies in."""
+        cx = c % shape[0]
+        rest = c // shape[0]
+        cy = rest % shape[1]
+        cz = rest // shape[1]
+        return cx // k + coarse_shape[0] * (cy // k + coarse_shape[1] * (cz // k))
+
+    @cuda.jit(device=True)
+    def aggregate_sum(aggregate, cell_sums, shape, k, coarse_shape):
+        """The sum of ``cell_sums`` over an aggregate's search cells, in cell order."""
+        bx = aggregate % coarse_shape[0]
+        rest = aggregate // coarse_shape[0]
+        by = rest % coarse_shape[1]
+        bz = rest // coarse_shape[1]
+        total = 0.0
+        for fz in range(bz * k, min(bz * k + k, shape[2])):
+            for fy in range(by * k, min(by * k + k, shape[1])):
+                for fx in range(bx * k, min(bx * k + k, shape[0])):
+                    total += cell_sums[fx + shape[0] * (fy + shape[1] * fz)]
+        return total
+
+    @cuda.jit
+    def coarse_flags(cell, diagonal, shape, k, coarse_shape, flags):
+        """``flags[a]`` 1 for the aggregates that hold an unknown row (the same value written
+        by every such row: the result does not depend on the order)."""
+        i = cuda.grid(1)
+        if i < cell.shape[0] and cell[i] >= 0 and diagonal[i] != 0.0:
+            flags[coarse_block(cell[i], shape, k, coarse_shape)] = 1
+
+    @cuda.jit
+    def coarse_matrix(
+        cell, start, member, index, count, coefficient, diagonal, shape, k, coarse_shape,
+        to_coarse, blocks, e,
+    ):  # fmt: skip
+        """Row a of the coarse operator E = Z^T A Z (dense, m x m): the sum of A's entries
+        between the rows of aggregate ``blocks[a]`` and those of each other aggregate (A_ii =
+        ``diagonal``, A_ij = -``coefficient``), in the aggregates' fixed order."""
+        a = cuda.grid(1)
+        if a >= blocks.shape[0]:
+            return
+        m = e.shape[0]
+        for col in range(m):
+            e[a, col] = 0.0
+        aggregate = blocks[a]
+        bx = aggregate % coarse_shape[0]
+        rest = aggregate // coarse_shape[0]
+        by = rest % coarse_shape[1]
+        bz = rest // coarse_shape[1]
+        for fz in range(bz * k, min(bz * k + k, shape[2])):
+            for fy in range(by * k, min(by * k + k, shape[1])):
+                for fx in range(bx * k, min(bx * k + k, shape[0])):
+                    c = fx + shape[0] * (fy + shape[1] * fz)
+                    for s in range(start[c], start[c + 1]):
+                        i = member[s]
+                        if diagonal[i] == 0.0:
+                            continue
+                        e[a, a] += diagonal[i]
+                        for t in range(count[i]):
+                            value = coefficient[t, i]
+                            if value != 0.0:
+                                j = index[t, i]
+                                col = to_coarse[coarse_block(cell[j], shape, k, coarse_shape)]
+                                if col >= 0:
+                                    e[a, col] -= value
+
+    @cuda.jit(device=True)
+    def two_level(
+        r, z, diagonal, inverse_diagonal, cell, start, member, shape, k, coarse_shape,
+        to_coarse, blocks, inverse, cell_sums, coarse_r, partial, coarse_z,
+    ):  # fmt: skip
+        """``z = D^-1 r + Z E^-1 Z^T r`` over the grid (``r`` complete on entry; each thread
+        writes z on its own rows): r summed over each search cell's members (in particle order,
+        the search's sorted lists) and then over each aggregate's cells, the dense product with
+        E^-1 in ``partial.shape[0]`` chunks of columns (their sums in chunk order), and each
+        unknown row's aggregate's value added to its Jacobi term. Fixed orders throughout."""
+        grid = cuda.cg.this_grid()
+        first = cuda.grid(1)
+        stride = cuda.gridsize(1)
+        for c in range(first, start.shape[0] - 1, stride):
+            total = 0.0
+            for s in range(start[c], start[c + 1]):
+                total += r[member[s]]
+            cell_sums[c] = total
+        grid.sync()
+        m = blocks.shape[0]
+        for a in range(first, m, stride):
+            coarse_r[a] = aggregate_sum(blocks[a], cell_sums, shape, k, coarse_shape)
+        grid.sync()
+        chunks = partial.shape[0]
+        length = (m + chunks - 1) // chunks
+        for w in range(first, m * chunks, stride):
+            a = w % m  # consecutive threads: consecutive a, one row of the symmetric E^-1
+            chunk = w // m
+            total = 0.0
+            for col in range(chunk * length, min(chunk * length + length, m)):
+                total += inverse[col, a] * coarse_r[col]
+            partial[chunk, a] = total
+        grid.sync()
+        for a in range(first, m, stride):
+            total = 0.0
+            for chunk in range(chunks):
+                total += partial[chunk, a]
+            coarse_z[a] = total
+        grid.sync()
+        for i in range(first, r.shape[0], stride):
+            zi = inverse_diagonal[i] * r[i]
+            if diagonal[i] != 0.0 and cell[i] >= 0:
+                col = to_coarse[coarse_block(cell[i], shape, k, coarse_shape)]
+                if col >= 0:
+                    zi += coarse_z[col]
+            z[i] = zi
+
     # ------------------------------------------------------------------- conjugate gradients
 
     @cuda.jit(device=True)
@@ -483,14 +619,17 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
     @cuda.jit
     def conjugate_gradient(
         index, count, coefficient, diagonal, inverse_diagonal, b, x, r, z, d, q, partial,
-        tolerance2, max_iterations, out,
+        tolerance2, max_iterations, out, cell, start, member, shape, k, coarse_shape,
+        to_coarse, blocks, inverse, cell_sums, coarse_r, coarse_partial, coarse_z,
     ):  # fmt: skip
-        """Jacobi-preconditioned CG for ``A x = b`` from the guess in ``x``, all iterations in
-        one cooperative launch: each thread takes every gridsize-th row, and the grid meets
-        at three barriers an iteration (the dot products' block sums are posted to one of two
+        """Preconditioned CG for ``A x = b`` from the guess in ``x``, all iterations in one
+        cooperative launch: each thread takes every gridsize-th row, and the grid meets at
+        three barriers an iteration (the dot products' block sums are posted to one of two
         slots by turns, so that a slot is rewritten only after every block has read it).
-        Stops when ``r.r <= tolerance2 b.b`` or after ``max_iterations``; ``out`` = (iterations,
-        r.r, b.b). Every thread computes the same scalars, so all take the same branches."""
+        The preconditioner is Jacobi, or with aggregates (``blocks`` not empty) Jacobi plus
+        the coarse correction of :func:`two_level`, four barriers more. Stops when ``r.r <=
+        tolerance2 b.b`` or after ``max_iterations``; ``out`` = (iterations, r.r, b.b). Every
+        thread computes the same scalars, so all take the same branches."""
         grid = cuda.cg.this_grid()
         shared = cuda.shared.array(block, dtype=float64)
         first = cuda.grid(1)
@@ -499,17 +638,28 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
         a = 0.0
         c = 0.0
         e = 0.0
+        coarse = blocks.shape[0] > 0
         for i in range(first, n, stride):
             ri = 0.0
             if diagonal[i] != 0.0:
                 ri = b[i] - product(i, index, count, coefficient, diagonal, x)
             r[i] = ri
-            zi = inverse_diagonal[i] * ri
-            z[i] = zi
-            d[i] = zi
-            a += ri * zi
+            if not coarse:
+                zi = inverse_diagonal[i] * ri
+                z[i] = zi
+                d[i] = zi
+                a += ri * zi
             c += ri * ri
             e += b[i] * b[i]
+        if coarse:
+            grid.sync()
+            two_level(
+                r, z, diagonal, inverse_diagonal, cell, start, member, shape, k, coarse_shape,
+                to_coarse, blocks, inverse, cell_sums, coarse_r, coarse_partial, coarse_z,
+            )  # fmt: skip
+            for i in range(first, n, stride):
+                d[i] = z[i]
+                a += r[i] * z[i]
         slot = 0
         post(partial, slot, a, c, e, shared)
         grid.sync()
@@ -543,10 +693,20 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
                 x[i] += alpha * d[i]
                 ri = r[i] - alpha * q[i]
                 r[i] = ri
-                zi = inverse_diagonal[i] * ri
-                z[i] = zi
-                a += ri * zi
+                if not coarse:
+                    zi = inverse_diagonal[i] * ri
+                    z[i] = zi
+                    a += ri * zi
                 c += ri * ri
+            if coarse:
+                grid.sync()
+                two_level(
+                    r, z, diagonal, inverse_diagonal, cell, start, member, shape, k,
+                    coarse_shape, to_coarse, blocks, inverse, cell_sums, coarse_r, coarse_partial,
+                    coarse_z,
+                )  # fmt: skip
+                for i in range(first, n, stride):
+                    a += r[i] * z[i]
             slot = 1 - slot
             post(partial, slot, a, c, 0.0, shared)
             grid.sync()
@@ -903,6 +1063,13 @@ class GPUSolver:
         self._extent = da(4)
         self._allocate_lists(self.width)
         self._host: dict[str, np.ndarray] = {}
+        # the coarse space (fluid.solver = "deflated"): none until the first solve makes it
+        self.two_level = p.solver == "deflated"
+        self._coarse_k = max(1, round(p.coarse_cell * l0 / self.search_radius))
+        self._coarse_age = COARSE_REFRESH  # steps since E^-1 was made: make it at once
+        self._coarse_baseline = 0  # the iterations of the first solve with this E^-1
+        self._coarse = no_coarse_space()
+        self.coarse_aggregates = 0
 
     # -------------------------------------------------------------------------- host views
 
@@ -1015,6 +1182,12 @@ class GPUSolver:
             self._allocate_lists(int(most * 1.25) + 8)
 
     # --------------------------------------------------------------------------------- step
+
+    def begin_frame(self) -> None:
+        """The coarse space (fluid.solver = "deflated") is made anew at a frame's first solve,
+        as after :meth:`restore`: a run resumed from a frame's checkpoint then solves with the
+        E^-1 the run itself had, to the bit."""
+        self._coarse_age = COARSE_REFRESH
 
     def stable_dt(self, external_acceleration: float = 0.0) -> float:
         """As :meth:`MPSSolver.stable_dt`, the maxima taken on the GPU."""
@@ -1157,16 +1330,24 @@ class GPUSolver:
         pressure, in one cooperative launch; the answer in ``_x``. Raises FluidDiverged as
         the CPU path does."""
         p = self.params
+        if self.two_level and self._coarse_age >= COARSE_REFRESH:
+            self._make_coarse_space()
         args = (
             self._index, self._list_count, self._coefficient, self._diagonal,
             self._inverse_diagonal, self._b, self._x, self._r, self._z, self._d0, self._q,
-            self._partial, p.tolerance**2, p.max_iterations, self._solve_out,
+            self._partial, p.tolerance**2, p.max_iterations, self._solve_out, *self._coarse,
         )  # fmt: skip
         kernel = self.k["conjugate_gradient"]
         if self._cg_blocks == 0:
             self._cg_blocks = cooperative_blocks(kernel, args, _grid(self.n))
         kernel[self._cg_blocks, BLOCK](*args)
         iterations, rr, bb = self._solve_out.copy_to_host()
+        if self.two_level:
+            self._coarse_age += 1
+            if self._coarse_age == 1:
+                self._coarse_baseline = int(iterations)
+            elif iterations > COARSE_STALE * self._coarse_baseline + 2:
+                self._coarse_age = COARSE_REFRESH  # stale: a new E^-1 for the next solve
         # a non-finite b (NaN or inf) gives a non-finite residual, as on the CPU
         residual = 0.0 if bb == 0.0 else math.sqrt(rr / bb)
         if not (residual <= p.tolerance) or not self._finite(self._x):
@@ -1179,6 +1360,62 @@ class GPUSolver:
                 residual=residual,
             )
         return int(iterations), residual
+
+    def _make_coarse_space(self) -> None:
+        """The aggregates of the current unknowns and E^-1 (m x m) on the GPU: which blocks of
+        search cells hold unknown rows (the blocks grown while there are too many, and kept
+        so for the run), E = Z^T A Z summed on the GPU, factored and inverted on the host
+        (Cholesky; E is symmetric positive definite as A is). Until the next, the aggregates
+        are these; rows in a block that had no unknown then get Jacobi alone."""
+        k, cuda_ = self.k, self._cuda
+        shape = self._shape
+        while True:
+            size = self._coarse_k
+            coarse_shape = np.ones(3, dtype=np.int64)
+            coarse_shape[:] = (shape + size - 1) // size
+            cells = int(np.prod(coarse_shape))
+            flags = cuda_.to_device(np.zeros(cells, dtype=np.int32))
+            d_coarse_shape = cuda_.to_device(coarse_shape)
+            k["coarse_flags"][_grid(self.n), BLOCK](
+                self._cell, self._diagonal, self._d_shape, size, d_coarse_shape, flags
+            )
+            blocks = np.flatnonzero(flags.copy_to_host()).astype(np.int64)
+            if len(blocks) <= min(COARSE_LARGEST, max(1, self.n // COARSE_PARTICLES)):
+                break
+            self._coarse_k += 1
+        self._coarse_age = 0
+        m = len(blocks)
+        if m == 0:
+            self._coarse = no_coarse_space()
+            self.coarse_aggregates = 0
+            return
+        to_coarse = np.full(cells, -1, dtype=np.int32)
+        to_coarse[blocks] = np.arange(m, dtype=np.int32)
+        d = cuda_.to_device
+        d_to_coarse, d_blocks = d(to_coarse), d(blocks)
+        e = cuda_.device_array((m, m))
+        k["coarse_matrix"][_grid(m), BLOCK](
+            self._cell, self._start, self._member, self._index, self._list_count,
+            self._coefficient, self._diagonal, self._d_shape, size, d_coarse_shape, d_to_coarse,
+            d_blocks, e,
+        )  # fmt: skip
+        matrix = e.copy_to_host()
+        try:
+            factor = scipy.linalg.cho_factor(matrix, lower=True, check_finite=True)
+            inverse = scipy.linalg.cho_solve(factor, np.eye(m), check_finite=False)
+        except (np.linalg.LinAlgError, ValueError) as error:  # not SPD or not finite: Jacobi
+            log.warning("coarse space of %d aggregates dropped (%s): Jacobi alone", m, error)
+            self._coarse = no_coarse_space()
+            self.coarse_aggregates = 0
+            return
+        inverse = 0.5 * (inverse + inverse.T)  # exactly symmetric: the preconditioner is SPD
+        da = cuda_.device_array
+        self._coarse = (
+            self._cell, self._start, self._member, self._d_shape, size, d_coarse_shape,
+            d_to_coarse, d_blocks, d(np.ascontiguousarray(inverse)), da(self._cells), da(m),
+            da((COARSE_CHUNKS, m)), da(m),
+        )  # fmt: skip
+        self.coarse_aggregates = m
 
     def _finite(self, vector: Any) -> bool:
         """Whether every entry of the device vector is finite (one reduction, read back)."""
@@ -1225,6 +1462,26 @@ class GPUSolver:
         self._rows_all.copy_to_device((self.kind != DUMMY).astype(np.bool_))
         self.time = float(arrays["time"])
         self._host.clear()
+        self._coarse_age = COARSE_REFRESH  # the coarse space of the restored state, next solve
+
+
+_NO_COARSE: tuple[Any, ...] | None = None
+
+
+def no_coarse_space() -> tuple[Any, ...]:
+    """The coarse-space arguments of the CG kernel for Jacobi alone (no aggregates): arrays of
+    the types a coarse space has, made once."""
+    global _NO_COARSE
+    if _NO_COARSE is None:
+        d = cuda.to_device
+        _NO_COARSE = (
+            d(np.full(1, -1, dtype=np.int64)), d(np.zeros(2, dtype=np.int32)),
+            d(np.zeros(1, dtype=np.int64)), d(np.ones(3, dtype=np.int64)), 1,
+            d(np.ones(3, dtype=np.int64)), d(np.full(1, -1, dtype=np.int32)),
+            d(np.zeros(0, dtype=np.int64)), d(np.zeros((1, 1))), d(np.zeros(1)), d(np.zeros(1)),
+            d(np.zeros((COARSE_CHUNKS, 1))), d(np.zeros(1)),
+        )  # fmt: skip
+    return _NO_COARSE
 
 
 def cooperative_blocks(kernel: Any, args: tuple[Any, ...], wanted: int) -> int:
@@ -1255,4 +1512,11 @@ def solver_on_gpu(params: MPSParameters, positions: np.ndarray, kinds: np.ndarra
     return GPUSolver(params, positions, kinds)
 
 
-__all__ = ["BLOCK", "GPUSolver", "simulated", "solver_on_gpu", "unavailable"]
+__all__ = [
+    "BLOCK",
+    "GPUSolver",
+    "no_coarse_space",
+    "simulated",
+    "solver_on_gpu",
+    "unavailable",
+]

@@ -448,6 +448,11 @@ class MPSSolver:
 
     # ------------------------------------------------------------------------------ time step
 
+    def begin_frame(self) -> None:
+        """Called by the frame loop before a frame's steps (:func:`jellysim.fluid.frames.
+        advance_to`). Nothing of this solver's is tied to frames; the GPU's makes its coarse
+        space anew there, so that a run resumed from a frame's checkpoint steps as the run."""
+
     def stable_dt(self, external_acceleration: float = 0.0) -> float:
         """The largest step the stability limits allow (s): the least of :func:`step_limits`
         for the live fluid particles' largest speed and their extent along gravity."""
