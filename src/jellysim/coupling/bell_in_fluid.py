@@ -141,7 +141,9 @@ class BellInFluid:
         """The bell's springs and muscle over the step from ``time`` (Eq. B8-B9), as the force
         density (N/m3) of the explicit stage on the bell's rows (§4.2.2): a host array, or on
         the GPU a device array. Its wall time is the run's "springs" phase (the log's time
-        per phase; on the GPU the implicit solve's, which waits for its answer)."""
+        per phase). On the GPU that is the implicit solve's, which waits for its answer; the
+        explicit springs' kernels run on after their launch, and their time falls in the
+        water's "explicit" phase."""
         with PhaseTimer(self.stats.seconds)("springs"):
             return self._springs(time, dt)
 

@@ -33,7 +33,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-import scipy.linalg
+import scipy.linalg.lapack
 
 from jellysim.fluid.geometry import DUMMY, FLUID, WALL
 from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT
@@ -506,15 +506,13 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
         cell, start, member, index, count, coefficient, diagonal, shape, k, coarse_shape,
         to_coarse, blocks, e,
     ):  # fmt: skip
-        """Row a of the coarse operator E = Z^T A Z (dense, m x m): the sum of A's entries
-        between the rows of aggregate ``blocks[a]`` and those of each other aggregate (A_ii =
-        ``diagonal``, A_ij = -``coefficient``), in the aggregates' fixed order."""
+        """Row a of the coarse operator E = Z^T A Z (dense, m x m, zero on entry): the sum of
+        A's entries between the rows of aggregate ``blocks[a]`` and those of each other
+        aggregate (A_ii = ``diagonal``, A_ij = -``coefficient``), in the aggregates' fixed
+        order."""
         a = cuda.grid(1)
         if a >= blocks.shape[0]:
             return
-        m = e.shape[0]
-        for col in range(m):
-            e[a, col] = 0.0
         aggregate = blocks[a]
         bx = aggregate % coarse_shape[0]
         rest = aggregate // coarse_shape[0]
@@ -531,8 +529,8 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
                         e[a, a] += diagonal[i]
                         for t in range(count[i]):
                             value = coefficient[t, i]
-                            if value != 0.0:
-                                j = index[t, i]
+                            j = index[t, i]
+                            if value != 0.0 and cell[j] >= 0:
                                 col = to_coarse[coarse_block(cell[j], shape, k, coarse_shape)]
                                 if col >= 0:
                                     e[a, col] -= value
@@ -627,7 +625,7 @@ def _build_kernels() -> dict[str, Any]:  # noqa: C901, PLR0915 - one closure per
         three barriers an iteration (the dot products' block sums are posted to one of two
         slots by turns, so that a slot is rewritten only after every block has read it).
         The preconditioner is Jacobi, or with aggregates (``blocks`` not empty) Jacobi plus
-        the coarse correction of :func:`two_level`, four barriers more. Stops when ``r.r <=
+        the coarse correction of :func:`two_level`, five barriers more. Stops when ``r.r <=
         tolerance2 b.b`` or after ``max_iterations``; ``out`` = (iterations, r.r, b.b). Every
         thread computes the same scalars, so all take the same branches."""
         grid = cuda.cg.this_grid()
@@ -1065,7 +1063,8 @@ class GPUSolver:
         self._host: dict[str, np.ndarray] = {}
         # the coarse space (fluid.solver = "deflated"): none until the first solve makes it
         self.two_level = p.solver == "deflated"
-        self._coarse_k = max(1, round(p.coarse_cell * l0 / self.search_radius))
+        self._coarse_base = max(1, round(p.coarse_cell * l0 / self.search_radius))
+        self._coarse_k = self._coarse_base
         self._coarse_age = COARSE_REFRESH  # steps since E^-1 was made: make it at once
         self._coarse_baseline = 0  # the iterations of the first solve with this E^-1
         self._coarse = no_coarse_space()
@@ -1363,12 +1362,15 @@ class GPUSolver:
 
     def _make_coarse_space(self) -> None:
         """The aggregates of the current unknowns and E^-1 (m x m) on the GPU: which blocks of
-        search cells hold unknown rows (the blocks grown while there are too many, and kept
-        so for the run), E = Z^T A Z summed on the GPU, factored and inverted on the host
+        search cells hold unknown rows (the blocks grown from ``coarse_cell`` while there are
+        too many), E = Z^T A Z summed on the GPU, factored and inverted on the host
         (Cholesky; E is symmetric positive definite as A is). Until the next, the aggregates
         are these; rows in a block that had no unknown then get Jacobi alone."""
         k, cuda_ = self.k, self._cuda
         shape = self._shape
+        # from the base size each time: the aggregates are a function of this state alone, so
+        # a resumed run makes the ones the run made
+        self._coarse_k = self._coarse_base
         while True:
             size = self._coarse_k
             coarse_shape = np.ones(3, dtype=np.int64)
@@ -1394,21 +1396,25 @@ class GPUSolver:
         d = cuda_.to_device
         d_to_coarse, d_blocks = d(to_coarse), d(blocks)
         e = cuda_.device_array((m, m))
+        k["fill"][_grid(m * m), BLOCK](e.reshape(m * m), 0.0)
         k["coarse_matrix"][_grid(m), BLOCK](
             self._cell, self._start, self._member, self._index, self._list_count,
             self._coefficient, self._diagonal, self._d_shape, size, d_coarse_shape, d_to_coarse,
             d_blocks, e,
         )  # fmt: skip
         matrix = e.copy_to_host()
-        try:
-            factor = scipy.linalg.cho_factor(matrix, lower=True, check_finite=True)
-            inverse = scipy.linalg.cho_solve(factor, np.eye(m), check_finite=False)
-        except (np.linalg.LinAlgError, ValueError) as error:  # not SPD or not finite: Jacobi
-            log.warning("coarse space of %d aggregates dropped (%s): Jacobi alone", m, error)
+        info = -1
+        if np.all(np.isfinite(matrix)):  # LAPACK's Cholesky factor, then the inverse from it
+            factor, info = scipy.linalg.lapack.dpotrf(matrix, lower=1)
+            if info == 0:
+                lower, info = scipy.linalg.lapack.dpotri(factor, lower=1)
+        if info != 0:  # not positive definite, or not finite: Jacobi alone
+            log.warning("coarse space of %d aggregates dropped (LAPACK %d): Jacobi alone", m, info)
             self._coarse = no_coarse_space()
             self.coarse_aggregates = 0
             return
-        inverse = 0.5 * (inverse + inverse.T)  # exactly symmetric: the preconditioner is SPD
+        # the lower triangle mirrored: E^-1 exactly symmetric, the preconditioner SPD
+        inverse = np.tril(lower) + np.tril(lower, -1).T
         da = cuda_.device_array
         self._coarse = (
             self._cell, self._start, self._member, self._d_shape, size, d_coarse_shape,
