@@ -26,8 +26,10 @@ for threads in ${THREADS-16 8 4 2 1}; do
   timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
 done
 say "== tests/gpu"
-JELLYSIM_TEST_GPU=1 timeout 200 $py -m pytest -q -p no:cacheprovider tests/gpu 2>&1 | tail -15 | tee -a "$out/log"
+JELLYSIM_TEST_GPU=1 timeout 200 $py -m pytest -q -p no:cacheprovider tests/gpu -k "not moon_jelly_fine" 2>&1 | tail -15 | tee -a "$out/log"
 say "== jellysim run dam-break-2d --device cuda"
 ( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"
 timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log"
+say "== moon-jelly-fine: three pulses, the water on the GPU, no tentacles (issue 28: at most 600 s; tests/gpu's test_moon_jelly_fine_* is the same run)"
+timeout 700 $py benchmarks/bell_pulses.py --full --preset moon-jelly-fine --pulses 3 --no-tentacles --set fluid.device='"cuda"' --out /tmp/fine-pulses 2>&1 | tail -5 | tee -a "$out/log"
 say "== done"
