@@ -1,7 +1,7 @@
 """The moon-jelly preset (issue 6): wall time for three pulses, per phase.
 
-    .venv/bin/python benchmarks/bench_moon.py [--seconds 0.5] [--threads N] [--preset NAME]
-        [--set KEY=VALUE ...]
+    .venv/bin/python benchmarks/bench_moon.py [--seconds 0.5 | --steps N] [--threads N]
+        [--preset NAME] [--set KEY=VALUE ...]
 
 The preset (``--preset``, default moon-jelly; moon-jelly-weightless for the paper's weightless
 set-up) at its own resolution (l0 = 0.16 m: 56,524 water and 1,076 bell particles, 10 tentacles)
@@ -18,6 +18,11 @@ springs leave dt to the fluid: in weightless water its Courant limit, which foll
 only the whole run counts; under gravity (moon-jelly) a fixed bound, kappa sqrt(l0 / g), tighter
 than the springs' (12 steps a frame), but the step's cost grows as the run goes on, so again
 only the whole run counts.
+``--steps N`` takes N MPS steps of the water and the bell instead (no frame: the tentacles and
+the margin's records are left out), for a preset whose frame takes many minutes on a CPU
+(moon-jelly-fine: 1.5 million water particles, 20 steps a frame); the kernels' compilation on a
+throw-away copy of the solver, a step's cost, is timed apart ("prepare"). The peak resident
+memory of the process is reported at the end.
 Results are not written to disk.
 """
 
@@ -27,6 +32,7 @@ import argparse
 import math
 import os
 import platform
+import resource
 import time
 
 import numba
@@ -38,6 +44,7 @@ import jellysim
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seconds", type=float, default=0.5)
+    parser.add_argument("--steps", type=int, default=0)
     parser.add_argument("--threads", type=int, default=numba.config.NUMBA_NUM_THREADS)
     parser.add_argument("--preset", default="moon-jelly")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -52,7 +59,12 @@ def main() -> None:
     simulation = jellysim.Simulation(scene)
     print(f"set-up: {time.perf_counter() - start:.2f} s")
     print(simulation.describe())
+    start = time.perf_counter()
     simulation.prepare()
+    print(f"prepare: {time.perf_counter() - start:.2f} s")
+    if args.steps:
+        mps_steps(simulation, args.steps)
+        return
 
     frames = max(1, round(args.seconds * scene.fps))
     steps = 0
@@ -111,6 +123,47 @@ def main() -> None:
             f"({per_frame} per frame); projected {needed * wall / steps / 60:.1f} min "
             f"at the measured {wall / steps:.2f} s per step"
         )
+
+
+def mps_steps(simulation: jellysim.Simulation, count: int) -> None:
+    """``count`` MPS steps of the water and the bell from rest, each of the stable dt, timed
+    one by one (the springs apart), and the bell's and the water's largest displacement."""
+    coupling = simulation.coupling
+    solver, bell = coupling.solver, coupling.body
+    frame_dt = 1.0 / simulation.scene.fps
+    springs = 0.0
+    spring_force = bell.step_force
+
+    def timed_springs(*a: object) -> None:
+        nonlocal springs
+        start = time.perf_counter()
+        spring_force(*a)  # type: ignore[arg-type]
+        springs += time.perf_counter() - start
+
+    bell.step_force = timed_springs  # type: ignore[method-assign]
+    start_position = solver.position.copy()
+    water = slice(0, coupling.water_particles)  # the MPS rows: water, bell, tank
+    l0 = solver.params.l0
+    for step in range(count):
+        springs = 0.0
+        dt = min(solver.stable_dt(), coupling.spring_dt)
+        before = dict(coupling.stats.seconds)
+        start = time.perf_counter()
+        coupling.advance(solver.time + dt, frame_dt)
+        wall = time.perf_counter() - start
+        phases = {k: v - before.get(k, 0.0) for k, v in coupling.stats.seconds.items()}
+        moved = np.linalg.norm(solver.position - start_position, axis=1)
+        print(
+            f"step {step + 1}: dt {dt:.4g} s, {wall:.1f} s wall (springs {springs:.2f} s; "
+            + ", ".join(f"{k} {v:.2f} s" for k, v in phases.items())
+            + f"), PPE iterations {coupling.stats.iterations}, residual "
+            f"{coupling.stats.residual:.2g}; largest move since rest: bell "
+            f"{moved[coupling.bell_rows].max() / l0:.2g} l0, "
+            f"water {moved[water].max() / l0:.2g} l0",
+            flush=True,
+        )
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    print(f"peak resident memory: {peak:.2f} GiB")
 
 
 if __name__ == "__main__":

@@ -10,6 +10,10 @@ the paper's material at this spacing) and the paper's uniform muscle band (0.3 o
 taper: the preset's until issue 26); ``MUSCLE_OFF`` the muscle neither contracting nor
 stiffening, ``SWIM_OFF`` SWIM with it.
 
+``SMALL_FINE``: moon-jelly-fine's lattice and wall (l0 = 0.16 m / 3, the 0.32 m wall six particles
+thick) on a bell 30 l0 wide and 12 l0 tall (4,628 particles, 104,112 springs) in a 36 x 36 x 21 l0
+tank filled 18 l0 deep: 18,700 water particles where the preset has 1.5 million.
+
 ``one_table(preset)``: a grouped preset's tree with its tentacles as one ``[tentacles]`` table of
 the shared keys (the moon-jelly presets before issue 25 gave them oral arms: the scene that
 older stored results and checkpoints were made from).
@@ -40,6 +44,17 @@ SMALL_MOON: dict[str, object] = {
     "fluid.tank_depth": 5.5,
     "fluid.tank_height": 4.5,
     "fluid.water_height": 3.75,
+}
+
+SMALL_FINE: dict[str, object] = {
+    "bell.radius": 0.8,
+    "bell.height": 0.64,
+    "bell.thickness": 0.5,
+    "bell.margin_height": 0.16,
+    "fluid.tank_width": 1.92,
+    "fluid.tank_depth": 1.92,
+    "fluid.tank_height": 1.12,
+    "fluid.water_height": 0.96,
 }
 
 SWIM_PERIOD = 2.0

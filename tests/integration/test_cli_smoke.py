@@ -14,6 +14,7 @@ import h5py
 import matplotlib.image
 import numpy as np
 import pytest
+from scenes import SMALL_FINE
 
 import jellysim
 from jellysim import fields
@@ -258,9 +259,15 @@ def test_api_run_and_open_result(tmp_path: Path) -> None:
         jellysim.open_result(tmp_path / "nowhere")
 
 
+# Presets run here on a smaller scene: moon-jelly-fine's 1.5 million water particles take 13-27 s
+# a step on 2 cores and 40 steps for 0.1 s; its lattice and six-particle wall run on a small bell
+# (tests/scenes.py), its own size in tests/unit/test_moon_jelly_fine.py (built, not stepped).
+SHRUNK: dict[str, dict[str, object]] = {"moon-jelly-fine": SMALL_FINE}
+
+
 @pytest.mark.parametrize("name", jellysim.preset_names())
 def test_every_preset_runs(tmp_path: Path, name: str) -> None:
-    scene = jellysim.load_scene(name, {"duration": 0.1})
+    scene = jellysim.load_scene(name, {**SHRUNK.get(name, {}), "duration": 0.1})
     with jellysim.run(scene, tmp_path) as r:
         assert r.frames == scene.frame_count >= 2
         assert r.scene == scene

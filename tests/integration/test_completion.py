@@ -49,6 +49,7 @@ def test_commands_options_values_presets_and_folders(script: Path, tmp_path: Pat
     assert complete(script, ["jellysim", "re"], tmp_path) == ["render"]
     assert complete(script, ["jellysim", "sch"], tmp_path) == ["schema"]
     assert sorted(complete(script, ["jellysim", "run", "moon-jelly-"], tmp_path)) == [
+        "moon-jelly-fine",
         "moon-jelly-real-size",
         "moon-jelly-weightless",
     ]
@@ -114,7 +115,11 @@ def test_fish_completes_commands_presets_and_values(tmp_path: Path) -> None:
         return [entry.split("\t")[0] for entry in asked.stdout.splitlines()]
 
     assert complete("jellysim ru") == ["run"]
-    assert complete("jellysim run moon-jelly-") == ["moon-jelly-real-size", "moon-jelly-weightless"]
+    assert complete("jellysim run moon-jelly-") == [
+        "moon-jelly-fine",
+        "moon-jelly-real-size",
+        "moon-jelly-weightless",
+    ]
     assert complete("jellysim render d --quality ") == ["draft", "final"]
     assert complete("jellysim export d --format g") == ["gltf"]
 

@@ -34,6 +34,7 @@ EXPECTED_LOOP = {
     "moon-jelly": "soft-bell",
     "moon-jelly-weightless": "soft-bell",
     "moon-jelly-real-size": "soft-bell",
+    "moon-jelly-fine": "soft-bell",
 }
 FRAMES = 2
 

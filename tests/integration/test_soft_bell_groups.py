@@ -23,7 +23,7 @@ from jellysim.render.pipeline import frame_cameras, make_members
 from jellysim.render.preview import make_view, project, render_preview
 
 ARM_COLOR = [0.2, 0.25, 0.9]  # a blue no other part of the moon jelly has: easy to find
-CASE_2 = ("moon-jelly", "moon-jelly-weightless", "moon-jelly-real-size")
+CASE_2 = ("moon-jelly", "moon-jelly-weightless", "moon-jelly-real-size", "moon-jelly-fine")
 
 
 def grouped_moon_tree() -> dict[str, Any]:

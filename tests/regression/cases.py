@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from scenes import SMALL_MOON, one_table
+from scenes import SMALL_FINE, SMALL_MOON, one_table
 
 # A few frames of the soft bell at the tests' coarse scale (l0 = 0.25 m, 448 bell particles).
 _MOON_SHORT: dict[str, object] = {**SMALL_MOON, "duration": 0.2, "fps": 10.0}
@@ -79,6 +79,9 @@ CASES: dict[str, tuple[str | dict[str, Any], dict[str, object]]] = {
         "moon-jelly-real-size",
         {"duration": 0.1, "fps": 20.0, "tentacles.count": 4},
     ),
+    # The preset's lattice and six-particle wall on a small bell (1.5 million water particles
+    # shrunk to 18,700), two 25 ms frames of 10 steps.
+    "moon-jelly-fine": ("moon-jelly-fine", {**SMALL_FINE, "duration": 0.05, "fps": 40.0}),
 }
 
 

@@ -100,9 +100,11 @@ RUN_OVERHEAD_BYTES = 2 * 2**20
 # entries, fitted to measured factors of m-row 9- and 27-point grid matrices (m = 450 to 500,000
 # in 2-D, 297 to 157,500 in 3-D): about 8 m ln m in 2-D and 8 m^1.45 in 3-D.
 LU_FILL = 8.0
-# Soft bell springs per particle, as fractions of the full lattice neighbourhood within
-# bell.spring_radius: the largest count of passive and of muscle springs at one particle of the
-# presets' bells (34 and 8-12 of 56 at 2.4 l0: their shells are two or three layers thick).
+# Soft bell springs at one particle, for the explicit springs' step bound, as fractions of the
+# full lattice neighbourhood within bell.spring_radius: the largest count of passive and of muscle
+# springs at one particle of bells two or three layers thick (34 and 8-15 of 56 at 2.4 l0 in
+# moon-jelly, moon-jelly-weightless and moon-jelly-real-size; moon-jelly-fine's six layers have 56
+# and 18, its springs implicit). The springs' count: _spring_count.
 PASSIVE_SPRING_SHARE = 0.6
 MUSCLE_SPRING_SHARE = 0.2
 
@@ -400,10 +402,21 @@ def planned_datasets(scene: Scene) -> tuple[list[Dataset], dict[str, int]]:
 
 
 def _spring_count(scene: Scene, bell: int) -> int:
-    """The bell's springs: half its particles' neighbours within bell.spring_radius, of which
-    the shell keeps :data:`PASSIVE_SPRING_SHARE`."""
-    neighbours = lattice_reference(3, scene.fluid.spacing, scene.bell.spring_radius, "square")
-    return round(0.5 * bell * neighbours.count * PASSIVE_SPRING_SHARE)
+    """The bell's springs: half its particles' neighbours within bell.spring_radius in a flat
+    slab of cubic-lattice cells as many layers thick as the shell (n = w / l0, at least 1),
+    where a neighbour |dz| layers across the slab is there for n - |dz| of its n layers. At
+    2.4 l0 a slab two layers thick keeps 33 of the 56 neighbours, six layers 48.3; the presets'
+    curved shells keep 27-28 (moon-jelly, moon-jelly-real-size) and 46.2 (moon-jelly-fine)."""
+    b = scene.bell
+    layers = max(1, round(b.thickness * b.height / scene.fluid.spacing))
+    reach = math.ceil(b.spring_radius)
+    axis = np.arange(-reach, reach + 1)
+    dx, dy, dz = np.meshgrid(axis, axis, axis, indexing="ij")
+    squared = dx**2 + dy**2 + dz**2
+    # the neighbours of lattice_reference: 0 < r < spring_radius, whatever the round-off
+    across = np.abs(dz[(squared > 0) & (squared < (b.spring_radius - 1e-9) ** 2)])
+    neighbours = np.maximum(layers - across, 0).sum() / layers
+    return round(0.5 * bell * neighbours)
 
 
 def _result_bytes(datasets: list[Dataset], static: dict[str, int], frames: int) -> int:
