@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 from numba.core import event
 
@@ -28,6 +29,7 @@ from jellysim.io.checkpoint import (
 )
 from jellysim.io.folders import check_writable, output_folder, writing_lock
 from jellysim.io.result import RESULT_FILE, Result, read_frames
+from jellysim.io.xdmf import write_xdmf
 from jellysim.progress import progress
 from jellysim.simulation.estimate import check_costs
 from jellysim.simulation.loop import FrameLoop, Observer, Simulation, make_loop
@@ -218,6 +220,11 @@ def _run(
             raise scene_mismatch(folder)
         if complete:
             log.info("%s is complete; nothing to resume", result_path)
+            # A run killed after its last frame but before its closing sidecar write left a
+            # sidecar of fewer frames (the writer skips rewrites closer together than
+            # SIDECAR_PAUSE): the sidecar is written again, listing every frame.
+            with h5py.File(result_path, "r") as f:
+                write_xdmf(f, result_path, result_path.with_suffix(".xdmf"), range(written))
             return Result(folder)
         frame, state = load_checkpoint(folder, scene_toml)
         if not 0 <= frame < min(written, scene.frame_count - 1):
