@@ -37,11 +37,12 @@ import numpy as np
 from jellysim.bell.soft import IMPLICIT_TOLERANCE, SoftBell
 from jellysim.errors import SimulationUnstable
 from jellysim.fluid import gpu
-from jellysim.fluid.gpu import (
+from jellysim.fluid.gpu import (  # cuda a module global: the simulator swaps it
     BLOCK,
+    _grid,
     cooperative_blocks,
     cuda,
-)  # a module global: the simulator swaps it
+)
 
 # The implicit solve's iterations at most (the CPU's too).
 MAX_ITERATIONS = 1000
@@ -364,10 +365,6 @@ class GPUSprings:
         iterations, rr, bb = self._out.copy_to_host()
         residual = 0.0 if bb == 0.0 else math.sqrt(rr / bb)
         return int(iterations), residual
-
-
-def _grid(n: int) -> int:
-    return max(1, (n + BLOCK - 1) // BLOCK)
 
 
 __all__ = ["GPUSprings"]
