@@ -397,14 +397,23 @@ def write_xdmf(
     path: Path,
     frames: Sequence[int],
     cache: SidecarCache | None = None,
+    *,
+    only_if_changed: bool = False,
 ) -> int:
     """Write to ``path`` the XDMF document of ``frames`` of ``f``, the result at ``result``
     (named in the document by its path relative to ``path``'s folder, :func:`result_reference`),
     whole or not at all: into a temporary file of this write's own, renamed over ``path``, so
     writers of the same sidecar (a run, an export) never share one. Returns its size in bytes;
     raises ValueError for a result XDMF cannot name, OSError for a failed write. ``cache``: see
-    :func:`xdmf_text`."""
+    :func:`xdmf_text`. ``only_if_changed``: leave ``path`` untouched (its bytes and its time)
+    when it already holds this document."""
     text = xdmf_text(f, result_reference(result, path.parent), frames, cache).encode()
+    if only_if_changed:
+        try:
+            if path.read_bytes() == text:
+                return len(text)
+        except OSError:
+            pass
     temporary = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
     out = open(temporary, "xb")  # noqa: SIM115 ("x": a file of this write's own, or an error)
     try:

@@ -222,9 +222,16 @@ def _run(
             log.info("%s is complete; nothing to resume", result_path)
             # A run killed after its last frame but before its closing sidecar write left a
             # sidecar of fewer frames (the writer skips rewrites closer together than
-            # SIDECAR_PAUSE): the sidecar is written again, listing every frame.
+            # SIDECAR_PAUSE): the sidecar is written again, listing every frame. A sidecar
+            # that already lists them is left as it is, bytes and time.
             with h5py.File(result_path, "r") as f:
-                write_xdmf(f, result_path, result_path.with_suffix(".xdmf"), range(written))
+                write_xdmf(
+                    f,
+                    result_path,
+                    result_path.with_suffix(".xdmf"),
+                    range(written),
+                    only_if_changed=True,
+                )
             return Result(folder)
         frame, state = load_checkpoint(folder, scene_toml)
         if not 0 <= frame < min(written, scene.frame_count - 1):
