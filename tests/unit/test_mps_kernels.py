@@ -463,6 +463,27 @@ def test_fcc_tank_geometry() -> None:
     np.testing.assert_allclose(n[away & (layers == 5)] / n0, 0.9639, atol=1e-4)
 
 
+@pytest.mark.parametrize("spacing", [0.0536667, 0.161 / 3, 0.0536665])
+def test_a_spacing_the_scene_check_accepts_builds_its_tank(spacing: float) -> None:
+    """The scene check (config/load.py) and the tank's lattice (geometry._cells) take the same
+    lengths as whole numbers of spacings: spheric-test2's 3.22 m at a spacing typed to seven
+    figures (docs/fluid.md's CI run, 0.0536667 for 0.161 / 3) builds 60 cells across, where it
+    used to pass the check and fail in the lattice ("internal error"); one 4e-6 off is refused by
+    the check as bad input, never as an internal error."""
+    from jellysim.config import load_scene
+    from jellysim.errors import InputError
+    from jellysim.simulation.fluid import FluidSimulation
+
+    overrides = {"fluid.spacing": spacing, "duration": 0.02}
+    if abs(3.22 / spacing - 60) > 6e-5:
+        with pytest.raises(InputError, match="not a whole number"):
+            load_scene("spheric-test2", overrides)
+        return
+    solver = FluidSimulation(load_scene("spheric-test2", overrides)).solver
+    fluid = solver.position[solver.kind == FLUID]
+    assert fluid[:, 0].max() < 3.22 and 3.22 - fluid[:, 0].max() < spacing
+
+
 def _gradient_acceleration(
     positions: np.ndarray,
     pressure: np.ndarray,

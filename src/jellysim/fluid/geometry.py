@@ -56,8 +56,11 @@ _TOLERANCE = 1e-9  # in l0: cell centres on a block's boundary count as inside
 
 
 def _cells(length: float, l0: float) -> int:
+    """The whole number of spacings ``l0`` in ``length``, within the scene check's tolerance
+    (config/load.py: 1e-6 of the count, so a spacing typed to six or seven figures, 0.0536667
+    for 0.161 / 3, is taken as meant)."""
     count = round(length / l0)
-    if count < 1 or abs(count * l0 - length) > 1e-6 * l0:
+    if count < 1 or abs(length / l0 - count) > 1e-6 * max(1.0, count):
         raise ValueError(f"length {length} is not a whole number of spacings l0 = {l0}")
     return count
 
