@@ -115,6 +115,19 @@ def unavailable() -> str | None:
     )
 
 
+def free_memory() -> tuple[int, str] | None:
+    """The GPU's free memory (bytes) and its name, for the run estimate's check; None where no
+    GPU can run (:func:`unavailable`) or in the simulator, which has no memory of its own."""
+    if simulated() or unavailable() is not None:
+        return None
+    try:
+        free, _total = cuda.current_context().get_memory_info()
+        name = cuda.get_current_device().name
+        return int(free), name.decode() if isinstance(name, bytes) else str(name)
+    except Exception:  # noqa: BLE001 - a driver that cannot say: the run finds out itself
+        return None
+
+
 def _kernels() -> dict[str, Any]:
     """The CUDA kernels, compiled on first use (Numba's CUDA module is imported only here)."""
     global _KERNELS

@@ -22,6 +22,11 @@ cannot hold.
   stability limits at the start (:func:`jellysim.fluid.mps.step_limits`; the water at rest, the
   soft bell's margin at its full speed). A rough figure: the constants were measured on a 2-core
   host (docs/decisions.md, "Costs before they are paid").
+- **On a GPU** (``fluid.device = "cuda"``): the solver's arrays are the GPU's (:class:`Costs`
+  ``gpu_memory``, as :class:`jellysim.fluid.gpu.GPUSolver` allocates them, compared in the CUDA
+  simulator in tests/unit/test_estimate.py), checked against the GPU's free memory; the host
+  keeps the state's frame copies; the MPS step takes :data:`GPU_SECONDS_PER_PARTICLE_STEP` a
+  fluid particle, at least :data:`GPU_SECONDS_PER_STEP` (an H200's, docs/performance.md).
 
 A fluid that would need more than :data:`jellysim.fluid.frames.MAX_STEPS_PER_FRAME` MPS steps a
 frame, or tentacles more than their substep cap, are refused here (exit 2) whatever the machine.
@@ -74,6 +79,12 @@ log = logging.getLogger(__name__)
 # measurements on this project's 2-core host listed in docs/decisions.md ("Costs before they are
 # paid") and docs/performance.md.
 FLUID_SECONDS_PER_PARTICLE_STEP = 1.0e-5
+# The same on a GPU (fluid.device = "cuda"), from docs/performance.md's H200 figures with the
+# Jacobi-preconditioned CG: 2.3e-7 s a particle-step at a million particles (tank-3d, 4.3 steps/s),
+# 1.8e-7 at 57,600 (moon-jelly's water); below about 20,000 particles a step is its launches,
+# a few milliseconds whatever the count (dam-break-2d at 3,680 particles).
+GPU_SECONDS_PER_PARTICLE_STEP = 2.5e-7
+GPU_SECONDS_PER_STEP = 5.0e-3
 TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP = 1.0e-6
 FRAME_SECONDS = 2.0e-3
 # A run estimated to take longer says so, in one line, before it starts.
@@ -141,10 +152,15 @@ class Costs:
     seconds: float = 0.0
     frames: int = 0
     plan: str = ""
+    gpu_memory: dict[str, int] = field(default_factory=dict)  # fluid.device = "cuda": the GPU's
 
     @property
     def memory_bytes(self) -> int:
         return sum(self.memory.values())
+
+    @property
+    def gpu_memory_bytes(self) -> int:
+        return sum(self.gpu_memory.values())
 
     @property
     def disk_bytes(self) -> int:
@@ -152,9 +168,11 @@ class Costs:
 
     def describe(self) -> str:
         """One line: the three estimates and the plan they rest on."""
+        gpu = f" and {size(self.gpu_memory_bytes)} on the GPU" if self.gpu_memory else ""
         return (
-            f"estimated cost: {size(self.memory_bytes)} of memory, {size(self.disk_bytes)} on "
-            f"disk, about {duration(self.seconds)} ({self.frames} frames, {self.plan})"
+            f"estimated cost: {size(self.memory_bytes)} of memory{gpu}, "
+            f"{size(self.disk_bytes)} on disk, about {duration(self.seconds)} ({self.frames} "
+            f"frames, {self.plan})"
         )
 
 
@@ -497,6 +515,54 @@ def _fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[str,
     }
 
 
+# The GPU path's arrays (jellysim.fluid.gpu.GPUSolver) per particle: five (N, D) float arrays
+# (position, velocity, their step copies, the start positions), twelve (N,) float vectors
+# (pressure, the two number densities, the PPE's diagonal, its inverse and right-hand side, the
+# CG's five vectors, the lowest neighbour pressure), the cell and member order (int64), the
+# within-radius count (int32) and six flags of a byte; the neighbour lists slot-major, each slot
+# an int32 index, a float distance and a float PPE coefficient.
+GPU_STATE_BYTES = (5, 12 * FLOAT + 2 * LONG + INDEX + 6)
+GPU_SLOT_BYTES = INDEX + 2 * FLOAT
+# The bell's springs on the GPU, per spring: the pair (int64 x 2), rest length, muscle share, the
+# two adjacency entries (int64 and a float sign each), tension and normal (3 floats each), the
+# muscle's two scalars.
+GPU_SPRING_BYTES = 2 * LONG + 2 * FLOAT + 2 * (LONG + FLOAT) + 6 * FLOAT + 2 * FLOAT
+
+
+def _gpu_fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[str, int]:
+    """The GPU path's device arrays (bytes by part), as :class:`jellysim.fluid.gpu.GPUSolver`
+    and :class:`jellysim.bell.gpu_springs.GPUSprings` allocate them; the lists at their
+    initial width (a search that finds a particle with more neighbours widens them)."""
+    from jellysim.fluid.gpu import COARSE_LARGEST, COARSE_PARTICLES, WIDTH_FACTOR
+
+    p = plan.params
+    n, dim = counts.total, counts.dim
+    width = math.ceil(WIDTH_FACTOR * lattice_reference(dim, p.l0, p.neighbour_radius, p.lattice)
+                      .count) + 8  # fmt: skip
+    f = scene.fluid
+    behind = (WALL_LAYERS + DUMMY_LAYERS) * p.l0
+    extent = [f.tank_width] + ([f.tank_depth] if dim == 3 else []) + [f.tank_height]
+    search = p.neighbour_radius * p.l0
+    cells = math.prod(int((e + 2 * behind) / search) + 3 for e in extent)
+    out = {
+        "GPU: MPS particles": n * (GPU_STATE_BYTES[0] * dim * FLOAT + GPU_STATE_BYTES[1]),
+        "GPU: neighbour lists": n * (width * GPU_SLOT_BYTES + INDEX),
+        "GPU: cell grid": cells * 3 * INDEX,
+    }
+    if p.solver == "deflated":  # E^-1 dense, with the aggregates' map over the cells
+        m = min(COARSE_LARGEST, max(1, n // COARSE_PARTICLES))
+        out["GPU: coarse space"] = m * m * FLOAT + cells * (INDEX + FLOAT) + m * 40 * FLOAT
+    if scene.bell.model == "mass-spring":
+        springs = _spring_count(scene, counts.bell)
+        bell = springs * GPU_SPRING_BYTES + n * dim * FLOAT
+        if scene.bell.spring_integration == "implicit":
+            degree = lattice_reference(3, 1.0, scene.bell.spring_radius, "square").count
+            rows = 3 * counts.bell
+            bell += rows * ((2 + 3 * degree) * (INDEX + FLOAT) + INDEX + 8 * FLOAT)
+        out["GPU: bell springs"] = bell
+    return out
+
+
 def _cells(scene: Scene, params: MPSParameters) -> int:
     """The cells of a neighbour search: ``radius / CELLS_PER_RADIUS`` wide over the tank with
     its walls and dummies."""
@@ -563,6 +629,7 @@ def estimate(scene: Scene) -> Costs:
     checkpoint = 0
     frame_seconds = FRAME_SECONDS
     plan: list[str] = []
+    gpu_memory: dict[str, int] = {}
     if scene.fluid.model == "mps":
         counts = particle_counts(scene)
         fluid = fluid_plan(scene, counts)
@@ -570,10 +637,19 @@ def estimate(scene: Scene) -> Costs:
         checkpoint += memory["checkpoint copy"]
         if scene.bell.model == "mass-spring":
             memory.update(_bell_memory(scene, counts))
-        frame_seconds += fluid.steps * counts.fluid * FLUID_SECONDS_PER_PARTICLE_STEP
+        if scene.fluid.device == "cuda":
+            # the solver's arrays live on the GPU; the host keeps the state's frame copies
+            for part in ("neighbour lists", "cell grid", "Poisson matrix", "pressure solver"):
+                del memory[part]
+            gpu_memory = _gpu_fluid_memory(scene, fluid, counts)
+            step = max(GPU_SECONDS_PER_STEP, counts.fluid * GPU_SECONDS_PER_PARTICLE_STEP)
+        else:
+            step = counts.fluid * FLUID_SECONDS_PER_PARTICLE_STEP
+        frame_seconds += fluid.steps * step
+        where = " on the GPU" if scene.fluid.device == "cuda" else ""
         plan.append(
             f"{fluid.steps} MPS steps a frame of {counts.total:,} particles "
-            f"({counts.fluid:,} fluid)"
+            f"({counts.fluid:,} fluid){where}"
         )
     if tentacle_plans:
         memory["tentacles"] = 0
@@ -601,7 +677,7 @@ def estimate(scene: Scene) -> Costs:
         "checkpoints": 2 * checkpoint if frames - 1 > scene.solver.checkpoint_every else 0,
         "scene.toml": len(scene_to_toml(scene).encode()),
     }
-    return Costs(memory, disk, (frames - 1) * frame_seconds, frames, "; ".join(plan))
+    return Costs(memory, disk, (frames - 1) * frame_seconds, frames, "; ".join(plan), gpu_memory)
 
 
 # --------------------------------------------------------------------------- the machine's limits
@@ -646,7 +722,8 @@ def check_costs(
     enforce: bool = True,
 ) -> Costs:
     """Estimate the scene's run and, with ``enforce``, refuse it (InputError, exit 2) before
-    anything is allocated when its memory exceeds what the machine has available or, for a run
+    anything is allocated when its memory exceeds what the machine has available, its GPU
+    memory (fluid.device = "cuda") what the GPU has free, or, for a run
     writing to ``folder``, its disk exceeds the space free there plus ``reclaimed`` (bytes of a
     result the run replaces or continues). A run writing to ``folder`` logs the estimate in one
     line, as a warning when it exceeds :data:`LONG_RUN_SECONDS` unless ``quiet``. The substep caps
@@ -661,6 +738,18 @@ def check_costs(
             "scene smaller (fluid.spacing, tentacles.count or tentacles.particles), or pass "
             "--no-estimate-check if the estimate is wrong"
         )
+    if enforce and costs.gpu_memory:
+        from jellysim.fluid.gpu import free_memory
+
+        gpu = free_memory()
+        if gpu is not None and costs.gpu_memory_bytes > gpu[0]:
+            part = max(costs.gpu_memory, key=costs.gpu_memory.__getitem__)
+            raise InputError(
+                f"the run would need about {size(costs.gpu_memory_bytes)} on the GPU ({part} "
+                f"{size(costs.gpu_memory[part])}), more than the {size(gpu[0])} free on "
+                f"{gpu[1]}; make the scene smaller (fluid.spacing), free the GPU, or set "
+                "fluid.device = 'cpu' (or pass --no-estimate-check if the estimate is wrong)"
+            )
     if folder is None:
         return costs
     free = free_disk(folder) + reclaimed
@@ -677,6 +766,8 @@ def check_costs(
 
 __all__ = [
     "FLUID_SECONDS_PER_PARTICLE_STEP",
+    "GPU_SECONDS_PER_PARTICLE_STEP",
+    "GPU_SECONDS_PER_STEP",
     "LONG_RUN_SECONDS",
     "TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP",
     "Costs",
