@@ -106,14 +106,20 @@ def written_frames(folder: Path) -> int:
 
 
 def plain_frames(path: Path) -> int:
-    """Open ``path`` with plain ``h5py.File(path, "r")`` and count the frames every per-frame
-    dataset holds; raises what h5py raises when it does not open."""
+    """Open ``path`` with plain ``h5py.File(path, "r")`` and count the frames as docs/results.md
+    tells any reader to: the rows every per-frame dataset holds, up to the first ``time`` that
+    is NaN (its fill value: a row a killed flush did not finish) or not later than the one
+    before it. Raises what h5py raises when it does not open."""
     with h5py.File(path, "r") as f:
-        return min(
+        rows = min(
             int(f[field.path].shape[0])
             for field in fields.FIELDS
             if field.per_frame and field.path in f
         )
+        times = f["time"][:rows]
+    good = np.isfinite(times)
+    good[1:] &= np.diff(times) > 0.0
+    return rows if good.all() else int(np.argmin(good))
 
 
 def one_line(stderr: str) -> str:

@@ -259,6 +259,8 @@ class ResultWriter:
                     dtype=spec.dtype,
                     data=data,
                     fletcher32=True,
+                    # a row whose chunk a killed flush did not index reads as NaN, not a time
+                    fillvalue=np.nan if spec.path == fields.TIME.path else None,
                 )
                 ds.attrs["units"] = spec.units
                 for key, value in spec.attributes:
@@ -408,14 +410,20 @@ class ResultWriter:
                 raise self._fault(f"cannot write the next frames ({_os_reason(err)})") from None
             start = self.frames
             try:
-                # ``time`` goes last: its length is the count of written frames, so a kill in
-                # the middle of a batch leaves the other datasets at least that long.
-                for name in sorted(self._datasets, key=lambda name: name == fields.TIME.path):
-                    ds = self._datasets[name]
-                    ds.resize(start + pending, axis=0)
-                    ds[start:] = np.stack(self._buffer[name])
-                    self._buffer[name].clear()
-                self._file.flush()
+                # Two flushes: every other dataset's rows are on disk before ``time`` grows.
+                # HDF5 writes a flush's index records in no set order, so a kill inside one
+                # flush can leave a dataset's new extent on disk without its new chunks' index
+                # entries (those rows read as the fill value; seen in CI as a result whose
+                # last five times read 0): ``time``'s rows then read NaN, its fill value, and
+                # readers count the frames up to the first of them (:func:`frames_written`).
+                for last in (False, True):
+                    for name, ds in self._datasets.items():
+                        if (name == fields.TIME.path) != last:
+                            continue
+                        ds.resize(start + pending, axis=0)
+                        ds[start:] = np.stack(self._buffer[name])
+                        self._buffer[name].clear()
+                    self._file.flush()
             except (OSError, RuntimeError) as err:  # h5py raises either for a failed write
                 # HDF5 would write its half-updated index on close: the file is left as the
                 # last good flush wrote it.
@@ -508,6 +516,26 @@ def _open(path: Path) -> h5py.File:
         # A killed run of an older jellysim (which wrote in SWMR mode) left SWMR's "open for
         # writing" flag set: SWMR read mode opens that file (its length was checked above).
         return h5py.File(path, "r", swmr=True)
+
+
+def frames_written(f: h5py.File) -> int:
+    """The frames a result holds: the rows every per-frame dataset has, up to the first row of
+    ``time`` that is not a time later than the row before it (NaN, ``time``'s fill value, or
+    0, an older file's). The writer grows ``time`` in a flush of its own after the other
+    datasets' rows are on disk, so a run killed mid-batch leaves the others a few rows longer
+    and may leave ``time`` rows its flush did not finish, which read as the fill value
+    (docs/results.md, "Reading a result with other tools")."""
+    rows = min(
+        (int(f[field.path].shape[0]) for field in fields.FIELDS
+         if field.per_frame and field.path in f),
+        default=0,
+    )  # fmt: skip
+    if rows == 0 or fields.TIME.path not in f:
+        return rows
+    times = np.asarray(f[fields.TIME.path][:rows], dtype=np.float64)
+    good = np.isfinite(times)
+    good[1:] &= np.diff(times) > 0.0
+    return rows if good.all() else int(np.argmin(good))
 
 
 def read_frames(path: Path, datasets: list[Dataset], count: int) -> dict[str, np.ndarray]:
@@ -627,14 +655,9 @@ class Result:
 
     @property
     def frames(self) -> int:
-        """Frames written: the rows every per-frame dataset holds (``time`` is extended last
-        in each batch, so a run killed mid-batch leaves other datasets a few rows longer)."""
+        """Frames written (:func:`frames_written`)."""
         if self._frames is None:
-            self._frames = min(
-                int(self.file[field.path].shape[0])
-                for field in fields.FIELDS
-                if field.per_frame and field.path in self.file
-            )
+            self._frames = frames_written(self.file)
         return self._frames
 
     # Per-frame arrays, (F, ...).
