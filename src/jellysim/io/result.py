@@ -524,7 +524,7 @@ def frames_written(f: h5py.File) -> int:
     0, an older file's). The writer grows ``time`` in a flush of its own after the other
     datasets' rows are on disk, so a run killed mid-batch leaves the others a few rows longer
     and may leave ``time`` rows its flush did not finish, which read as the fill value
-    (docs/results.md, "Reading a result with other tools")."""
+    (docs/results.md, "Killed runs and resume")."""
     rows = min(
         (int(f[field.path].shape[0]) for field in fields.FIELDS
          if field.per_frame and field.path in f),
