@@ -17,7 +17,11 @@ too (peaks are higher there). The measures:
   vamseeachanta/digitalmodel, ``validation/kleefsman.py``, ``extract_impact_metrics``);
 - the mean absolute difference of H2 and H4 over the run, at the measured samples, divided by
   the measured maximum over the same window (that source's "normalized MAE"; from the 5 ms
-  means, and from the 1 kHz record with ``--raw``).
+  means, and from the 1 kHz record with ``--raw``);
+- the wave that comes back from the dry end's wall (docs/fluid.md, "What the late return is
+  not"), beside the 5 ms means: H1's highest in 0.5-1.5 s, H2's first hump (highest in 1-3 s),
+  the time H4 passes 0.16 m after 2 s, H4's second peak (3-5 s) and the time H2 passes 0.2 m
+  after 4 s.
 """
 
 from __future__ import annotations
@@ -60,6 +64,30 @@ def normalized_mae(times, values, ref_t, ref_values) -> float:
     return float(np.mean(np.abs(simulated - ref_values[window])) / ref_values[window].max())
 
 
+def highest(times: np.ndarray, values: np.ndarray, start: float, end: float) -> str:
+    """'0.34 m at 1.79 s': the largest of ``values`` with ``start <= times <= end``."""
+    inside = (times >= start) & (times <= end)
+    k = int(np.argmax(np.where(inside, values, -np.inf)))
+    return f"{values[k]:.3f} m at {times[k]:.2f} s"
+
+
+def passes(times: np.ndarray, values: np.ndarray, level: float, after: float) -> str:
+    """'2.75 s': the first time after ``after`` at which ``values`` reach ``level``."""
+    k = np.flatnonzero((times > after) & (values >= level))
+    return f"{times[k[0]]:.2f} s" if k.size else "never"
+
+
+def return_wave(times: np.ndarray, heights: dict[str, np.ndarray]) -> list[str]:
+    """The returning wave's measures (module docstring), one line each."""
+    return [
+        f"H1 highest, 0.5-1.5 s: {highest(times, heights['H1'], 0.5, 1.5)}",
+        f"H2 first hump, 1-3 s: {highest(times, heights['H2'], 1.0, 3.0)}",
+        f"H4 passes 0.16 m after 2 s: {passes(times, heights['H4'], 0.16, 2.0)}",
+        f"H4 second peak, 3-5 s: {highest(times, heights['H4'], 3.0, 5.0)}",
+        f"H2 passes 0.2 m after 4 s: {passes(times, heights['H2'], 0.2, 4.0)}",
+    ]
+
+
 def report(path: Path, raw: dict[str, np.ndarray] | None) -> None:
     with jellysim.open_result(path) as result:
         times = np.asarray(result.time, dtype=float)
@@ -85,6 +113,11 @@ def report(path: Path, raw: dict[str, np.ndarray] | None) -> None:
         for label, data in sources:
             mae = normalized_mae(times, probes[name], data["t"], data[name])
             print(f"  {name} normalized MAE over 0-{times[-1]:.1f} s ({label}): {100 * mae:.1f} %")
+    heights = ("H1", "H2", "H4")
+    simulated = return_wave(times, {name: probes[name] for name in heights})
+    measured = return_wave(ref["t"], {name: ref[name] for name in heights})
+    for ours, theirs in zip(simulated, measured, strict=True):
+        print(f"  {ours} | measured (5 ms means) {theirs.split(': ')[1]}")
 
 
 def main() -> None:
