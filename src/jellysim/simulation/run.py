@@ -13,7 +13,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 from numba.core import event
 
@@ -216,22 +215,23 @@ def _run(
             same = same_scene(existing.scene_text, scene_toml)
             complete = existing.complete
             written = existing.frames
-        if not same:
-            raise scene_mismatch(folder)
-        if complete:
-            log.info("%s is complete; nothing to resume", result_path)
-            # A run killed after its last frame but before its closing sidecar write left a
-            # sidecar of fewer frames (the writer skips rewrites closer together than
-            # SIDECAR_PAUSE): the sidecar is written again, listing every frame. A sidecar
-            # that already lists them is left as it is, bytes and time.
-            with h5py.File(result_path, "r") as f:
+            if same and complete:
+                # A run killed after its last frame but before its closing sidecar write left
+                # a sidecar of fewer frames (the writer skips rewrites closer together than
+                # SIDECAR_PAUSE): the sidecar is written again, listing every frame, from the
+                # file as Result opened it (an older jellysim's SWMR-flagged file too). A
+                # sidecar that already lists them is left as it is, bytes and time.
                 write_xdmf(
-                    f,
+                    existing.file,
                     result_path,
                     result_path.with_suffix(".xdmf"),
                     range(written),
                     only_if_changed=True,
                 )
+        if not same:
+            raise scene_mismatch(folder)
+        if complete:
+            log.info("%s is complete; nothing to resume", result_path)
             return Result(folder)
         frame, state = load_checkpoint(folder, scene_toml)
         if not 0 <= frame < min(written, scene.frame_count - 1):
