@@ -3,7 +3,7 @@ time per phase, particle-steps per second and wall time per simulated second, an
 two paths' water is apart after the same steps.
 
     python benchmarks/bench_gpu.py [--case NAME ...] [--steps 20] [--cpu-threads 16]
-        [--compare-steps 20]
+        [--compare-steps 20] [--gpu-solver deflated|cg ...]
 
 Cases, each from rest at its preset's scheme (the pressure to a relative residual of 1e-8):
 
@@ -17,6 +17,8 @@ Cases, each from rest at its preset's scheme (the pressure to a relative residua
   step as a run reads them (the steps from rest, before the column has gathered speed: the
   steps of the run's first moments, not its mean step).
 
+``--gpu-solver deflated|cg`` (repeatable) times the GPU with each pressure solver in turn:
+CG with Jacobi and the coarse correction, or with Jacobi alone (default: the preset's).
 ``--cpu-threads N`` (0: none) also times the CPU path on N threads for the cases under 100,000
 particles; ``--compare-steps K`` then steps both paths K times with the CPU's dt and prints the
 largest distance between their fluid particles (the paths sum in other orders and solve with
@@ -86,6 +88,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--cpu-threads", type=int, default=0)
     parser.add_argument("--compare-steps", type=int, default=0)
+    parser.add_argument(
+        "--gpu-solver",
+        choices=("deflated", "cg"),
+        action="append",
+        help="the GPU's pressure solver, each given timed in turn (default: the preset's)",
+    )
     args = parser.parse_args()
     from jellysim.fluid import gpu
 
@@ -101,68 +109,98 @@ def main() -> None:
     )
     for case in args.case or list(CASES):
         preset, overrides = CASES[case]
-        scene = jellysim.load_scene(preset, {**overrides, "fluid.device": "cuda"})
-        clock = time.perf_counter()
-        simulation = FluidSimulation(scene)
-        device = simulation.solver
-        fluid = int(np.sum(device.kind == FLUID))
-        probes = simulation.probes
-        after_step = None if probes is None else probes.after_step
-        device.step(device.stable_dt())  # compiles the kernels
-        if after_step is not None:
-            after_step(0.0)  # compiles the probes' kernel
-        first = time.perf_counter() - clock
-        wall, seconds, iterations, simulated = _time_steps(device, args.steps, after_step)
-        phases = ", ".join(f"{k} {1000 * v / args.steps:.2f} ms" for k, v in seconds.items())
+        for solver in args.gpu_solver or [None]:
+            scene, fluid = _time_gpu(case, preset, overrides, solver, args.steps)
+        if args.cpu_threads > 0 and fluid <= 100_000:
+            _time_cpu(case, preset, overrides, scene, args.cpu_threads, args.steps)
+            if args.compare_steps > 0:
+                _compare(case, preset, overrides, scene, args.compare_steps)
+
+
+def _time_gpu(
+    case: str, preset: str, overrides: dict[str, object], solver: str | None, steps: int
+) -> tuple[jellysim.Scene, int]:
+    """Times ``steps`` GPU steps of ``case`` with the pressure ``solver`` (None: the
+    preset's), prints them, and returns the scene and its fluid particles."""
+    chosen = {} if solver is None else {"fluid.solver": solver}
+    scene = jellysim.load_scene(preset, {**overrides, **chosen, "fluid.device": "cuda"})
+    clock = time.perf_counter()
+    simulation = FluidSimulation(scene)
+    device = simulation.solver
+    fluid = int(np.sum(device.kind == FLUID))
+    probes = simulation.probes
+    after_step = None if probes is None else probes.after_step
+    device.step(device.stable_dt())  # compiles the kernels
+    if after_step is not None:
+        after_step(0.0)  # compiles the probes' kernel
+    first = time.perf_counter() - clock
+    wall, seconds, iterations, simulated = _time_steps(device, steps, after_step)
+    phases = ", ".join(f"{k} {1000 * v / steps:.2f} ms" for k, v in seconds.items())
+    print(
+        f"{case} GPU ({scene.fluid.solver}): {fluid} fluid + {len(device.kind) - fluid} "
+        f"wall/dummy particles (set-up and first step {first:.1f} s); {steps / wall:.1f} "
+        f"steps/s, {fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s per "
+        f"simulated second (dt {simulated / steps:.3g} s); CG iterations "
+        f"{np.mean(iterations):.0f} (mean); per step: {phases}; neighbour-list width "
+        f"{device.width}"
+        + ("" if probes is None else f"; {len(probes.pressure_names)} pressure probes read"),
+        flush=True,
+    )
+    if probes is not None:  # heights now, pressures the mean over the timed steps
+        probes.end_frame()
         print(
-            f"{case} GPU: {fluid} fluid + {len(device.kind) - fluid} wall/dummy particles "
-            f"(set-up and first step {first:.1f} s); {args.steps / wall:.1f} steps/s, "
-            f"{fluid * args.steps / wall:.3g} particle-steps/s, "
-            f"{wall / simulated:.1f} s per simulated second (dt {simulated / args.steps:.3g} s); "
-            f"Jacobi-CG iterations {np.mean(iterations):.0f} (mean); per step: {phases}; "
-            f"neighbour-list width {device.width}"
-            + ("" if probes is None else f"; {len(probes.pressure_names)} pressure probes read"),
+            f"{case} probes at t = {device.time:.4f} s: "
+            + ", ".join(f"{k} {np.round(v, 4)}" for k, v in probes.frame_values().items()),
             flush=True,
         )
-        if probes is not None:  # heights now, pressures the mean over the timed steps
-            probes.end_frame()
-            print(
-                f"{case} probes at t = {device.time:.4f} s: "
-                + ", ".join(f"{k} {np.round(v, 4)}" for k, v in probes.frame_values().items()),
-                flush=True,
-            )
-        if args.cpu_threads <= 0 or fluid > 100_000:
-            continue
-        numba.set_num_threads(args.cpu_threads)
-        cpu_scene = jellysim.load_scene(preset, overrides)
-        cpu = FluidSimulation(cpu_scene).solver
-        cpu.step(cpu.stable_dt())  # compile, or load from Numba's cache
-        wall, seconds, iterations, simulated = _time_steps(cpu, min(args.steps, 10))
-        steps = min(args.steps, 10)
-        print(
-            f"{case} CPU, {args.cpu_threads} threads: {steps / wall:.2f} steps/s, "
-            f"{fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s per simulated "
-            f"second; {cpu_scene.fluid.solver} iterations {np.mean(iterations):.0f}",
-            flush=True,
-        )
-        if args.compare_steps <= 0:
-            continue
-        cpu = FluidSimulation(cpu_scene).solver
-        device = FluidSimulation(scene).solver
-        rows = cpu.kind == FLUID
-        for _ in range(args.compare_steps):
-            dt = cpu.stable_dt()
-            cpu.step(dt)
-            device.step(dt)
-        apart = np.abs(cpu.position[rows] - device.position[rows]).max()
-        speed = np.abs(cpu.velocity[rows]).max()
-        print(
-            f"{case}: after {args.compare_steps} steps (t = {cpu.time:.4f} s) the paths' fluid "
-            f"particles are at most {apart:.3g} m = {apart / cpu.params.l0:.3g} l0 apart "
-            f"(largest speed {speed:.3g} m/s, velocities at most "
-            f"{np.abs(cpu.velocity[rows] - device.velocity[rows]).max():.3g} m/s apart)",
-            flush=True,
-        )
+    return scene, fluid
+
+
+def _time_cpu(
+    case: str,
+    preset: str,
+    overrides: dict[str, object],
+    scene: jellysim.Scene,
+    threads: int,
+    steps: int,
+) -> None:
+    """Times the CPU path of ``case`` on ``threads`` threads and prints it."""
+    numba.set_num_threads(threads)
+    cpu_scene = jellysim.load_scene(preset, overrides)
+    cpu = FluidSimulation(cpu_scene).solver
+    fluid = int(np.sum(cpu.kind == FLUID))
+    cpu.step(cpu.stable_dt())  # compile, or load from Numba's cache
+    steps = min(steps, 10)
+    wall, _, iterations, simulated = _time_steps(cpu, steps)
+    print(
+        f"{case} CPU, {threads} threads: {steps / wall:.2f} steps/s, "
+        f"{fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s per simulated "
+        f"second; {cpu_scene.fluid.solver} iterations {np.mean(iterations):.0f}",
+        flush=True,
+    )
+
+
+def _compare(
+    case: str, preset: str, overrides: dict[str, object], scene: jellysim.Scene, steps: int
+) -> None:
+    """Steps the CPU and GPU paths ``steps`` times with the CPU's dt and prints how far
+    apart their fluid particles are."""
+    cpu = FluidSimulation(jellysim.load_scene(preset, overrides)).solver
+    device = FluidSimulation(scene).solver
+    rows = cpu.kind == FLUID
+    for _ in range(steps):
+        dt = cpu.stable_dt()
+        cpu.step(dt)
+        device.step(dt)
+    apart = np.abs(cpu.position[rows] - device.position[rows]).max()
+    speed = np.abs(cpu.velocity[rows]).max()
+    print(
+        f"{case}: after {steps} steps (t = {cpu.time:.4f} s) the paths' fluid "
+        f"particles are at most {apart:.3g} m = {apart / cpu.params.l0:.3g} l0 apart "
+        f"(largest speed {speed:.3g} m/s, velocities at most "
+        f"{np.abs(cpu.velocity[rows] - device.velocity[rows]).max():.3g} m/s apart)",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

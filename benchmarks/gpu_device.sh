@@ -13,6 +13,9 @@
 #   dam-break  dam-break-2d run on the GPU and plotted against Martin & Moyce
 #   fine       moon-jelly-fine for three pulses on the GPU (issue 28's 10 minutes: a session
 #              of its own; the tests part leaves its test in tests/gpu out)
+# Limits and options from the environment: TESTS_LIMIT (s, default 240), STEPS_LIMIT (s,
+# default 220), CPU_THREADS (16), GPU_SOLVERS (e.g. "--gpu-solver deflated --gpu-solver cg":
+# the steps part times the GPU with each pressure solver; default the presets').
 #   bash benchmarks/gpu_device.sh OUTDIR [PART ...]   (no part: tests steps moon-jelly, about
 #   9 minutes at most, which a 15-minute device session holds with its start)
 # Each part has a time limit, so that one stuck part leaves the others' figures.
@@ -32,10 +35,10 @@ for part in $parts; do
   case $part in
     tests)
       say "== tests/gpu"
-      JELLYSIM_TEST_GPU=1 timeout 240 $py -m pytest -q -p no:cacheprovider tests/gpu -k "not moon_jelly_fine" 2>&1 | tail -15 | tee -a "$out/log" ;;
+      JELLYSIM_TEST_GPU=1 timeout ${TESTS_LIMIT-240} $py -m pytest -q -p no:cacheprovider tests/gpu -k "not moon_jelly_fine" 2>&1 | tee "$out/tests.log" | tail -15 | tee -a "$out/log" ;;
     steps)
       say "== bench_gpu.py"
-      timeout 220 $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 2>&1 | tee -a "$out/log" ;;
+      timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 ${GPU_SOLVERS-} 2>&1 | tee -a "$out/log" ;;
     moon-jelly)
       say "== moon-jelly, three pulses on the GPU (bell_pulses.py --full --pulses 3 --no-tentacles)"
       timeout 150 $py benchmarks/bell_pulses.py --full --pulses 3 --no-tentacles --set fluid.device='"cuda"' 2>&1 | tail -8 | tee -a "$out/log" ;;
