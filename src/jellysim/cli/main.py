@@ -255,6 +255,19 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Libraries whose INFO messages are theirs, not a run's: numba-cuda's driver logs every GPU
+# allocation and free ("dealloc: cuMemFree 24 bytes") at INFO once the root logger has a handler.
+QUIET_LOGGERS = ("numba", "numba_cuda")
+
+
+def log_to_stderr() -> None:
+    """A run's progress and notices (jellysim's INFO messages) on stderr, one per line; other
+    libraries' only from WARNING up."""
+    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+    for name in QUIET_LOGGERS:
+        logging.getLogger(name).setLevel(logging.WARNING)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from jellysim.config import load_scene
     from jellysim.simulation import run
@@ -264,7 +277,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overrides.append(f"fluid.device={args.device!r}")
     scene = load_scene(args.scene, overrides)
     if not args.quiet:
-        logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+        log_to_stderr()
     result = run(
         scene,
         args.out,

@@ -29,6 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -59,6 +60,13 @@ try:  # Numba's CUDA support; kernels use it as a module global (the simulator s
 except Exception as _error:  # noqa: BLE001 - any failure means: no CUDA here
     cuda = None  # type: ignore[assignment]
     _CUDA_ERROR = str(_error)
+
+# The coarse space's kernels, and every kernel in a small tank, launch a few blocks on purpose;
+# numba-cuda warns of each such launch ("Grid size 1 will likely result in GPU
+# under-utilization"), which tells a user of jellysim nothing they can act on.
+warnings.filterwarnings(
+    "ignore", message=r"Grid size \d+ will likely result in GPU under-utilization"
+)
 
 
 def simulated() -> bool:
