@@ -15,7 +15,8 @@ soft-bell preset so (``moon-jelly-fine``: its 1.5 million water particles want a
 ``--set bell.spring_stiffness=320`` or ``--set fluid.device='"cuda"'``. ``--pulses N`` runs N
 pulses instead of five; ``--no-tentacles`` leaves the preset's tentacle groups out (the bell
 alone: with ``flow.two_way`` false, the preset's, tentacles do not act on the bell or the
-water). The time printed is the whole run's wall time, set-up and compilation included.
+water). The time printed is the whole run's wall time, set-up and compilation included; the
+run's log (stderr) ends with its time per phase.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from scenes import SWIM, SWIM_PERIOD  # noqa: E402
 
 import jellysim  # noqa: E402
+from jellysim.cli.main import log_to_stderr  # noqa: E402
 from jellysim.config.load import parse_override  # noqa: E402
 
 PULSES = 5
@@ -84,6 +86,9 @@ def main() -> None:
     parser.add_argument("--no-tentacles", action="store_true")
     parser.add_argument("--preset", default="moon-jelly")
     args = parser.parse_args()
+    # the run's notices, among them its time per phase at the end (the springs' implicit solve,
+    # the water's phases), as `jellysim run` shows them
+    log_to_stderr()
     scene = args.preset
     if args.no_tentacles:
         import tomli_w

@@ -41,7 +41,7 @@ for part in $parts; do
       timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 ${GPU_SOLVERS-} 2>&1 | tee -a "$out/log" ;;
     moon-jelly)
       say "== moon-jelly, three pulses on the GPU (bell_pulses.py --full --pulses 3 --no-tentacles)"
-      timeout 150 $py benchmarks/bell_pulses.py --full --pulses 3 --no-tentacles --set fluid.device='"cuda"' 2>&1 | tail -8 | tee -a "$out/log" ;;
+      timeout 150 $py benchmarks/bell_pulses.py --full --pulses 3 --no-tentacles --set fluid.device='"cuda"' 2>&1 | tee "$out/moon-jelly.log" | grep -E "time per phase|as it is|pulse |Error|error" | tee -a "$out/log" ;;
     spheric)
       say "== bench_gpu.py --case spheric-test2-million"
       timeout 150 $py benchmarks/bench_gpu.py --case spheric-test2-million --steps 20 2>&1 | tee -a "$out/log" ;;
@@ -56,7 +56,7 @@ for part in $parts; do
       timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log" ;;
     fine)
       say "== moon-jelly-fine: three pulses, no tentacles (issue 28: at most 600 s; tests/gpu's test_moon_jelly_fine_* is the same run)"
-      timeout 580 $py benchmarks/bell_pulses.py --full --preset moon-jelly-fine --pulses 3 --no-tentacles --set fluid.device='"cuda"' --out /tmp/fine-pulses 2>&1 | tail -5 | tee -a "$out/log" ;;
+      timeout 580 $py benchmarks/bell_pulses.py --full --preset moon-jelly-fine --pulses 3 --no-tentacles --set fluid.device='"cuda"' --out /tmp/fine-pulses 2>&1 | tee "$out/fine.log" | grep -E "time per phase|as it is|pulse |simulating|Error|error" | tail -12 | tee -a "$out/log" ;;
     *)
       say "unknown part: $part (tests steps moon-jelly spheric threads dam-break fine)" ;;
   esac

@@ -600,3 +600,39 @@ def test_surface_repulsion_skips_a_particle_without_neighbours() -> None:
     surface = np.array([True, True])
     accelerations = _gradient_acceleration(positions, pressure, True, surface)
     np.testing.assert_array_equal(accelerations, 0.0)
+
+
+def test_commit_step_takes_the_corrected_state_and_kills_escaped_fluid_only() -> None:
+    """kernels.commit_step against the rule it replaced (NumPy, serial): the corrected arrays
+    become the state; a live fluid particle outside the domain or with a non-finite position
+    or velocity dies with velocity and pressure 0; walls, dummies and the dead are left."""
+    rng = np.random.default_rng(7)
+    n = 400
+    kind = rng.choice(np.array([FLUID, WALL, DUMMY], dtype=np.int8), n)
+    alive = rng.random(n) > 0.05
+    new_position = rng.uniform(-0.1, 1.1, (n, 3))  # some outside [0, 1]^3
+    new_velocity = rng.normal(size=(n, 3))
+    new_position[rng.random(n) < 0.03, 1] = np.nan
+    new_velocity[rng.random(n) < 0.03, 2] = np.inf
+    pressure = rng.random(n)
+    low, high = np.zeros(3), np.ones(3)
+
+    expected_alive = alive.copy()
+    finite = np.isfinite(new_position).all(1) & np.isfinite(new_velocity).all(1)
+    inside = np.all((new_position >= low) & (new_position <= high), 1)
+    dying = alive & (kind == FLUID) & ~(finite & inside)
+    expected_alive[dying] = False
+    expected_velocity = new_velocity.copy()
+    expected_velocity[dying] = 0.0
+    expected_pressure = pressure.copy()
+    expected_pressure[dying] = 0.0
+    assert 10 < dying.sum() < n // 2  # the draw exercises both outcomes
+
+    position, velocity = np.zeros((n, 3)), np.zeros((n, 3))
+    kernels.commit_step(
+        position, velocity, new_position, new_velocity, pressure, kind, alive, low, high
+    )
+    np.testing.assert_array_equal(position, new_position)
+    np.testing.assert_array_equal(velocity, expected_velocity)
+    np.testing.assert_array_equal(pressure, expected_pressure)
+    np.testing.assert_array_equal(alive, expected_alive)

@@ -504,8 +504,11 @@ class MPSSolver:
             # Pressure gradient and correction, Eq. (F10) or (F10a), (F13)
             self._correct(dt, system)
             self.time += dt
-            # Particles that left the domain or stopped being finite die
-            self._remove_escaped()
+            # the corrected state; particles that left the domain or stopped being finite die
+            kernels.commit_step(
+                self.position, self.velocity, self._position, self._velocity, self.pressure,
+                self.kind, self.alive, self.domain_min, self.domain_max,
+            )  # fmt: skip
             stats.dead = int((~self.alive).sum())
         return stats
 
@@ -582,15 +585,14 @@ class MPSSolver:
 
     def _correct(self, dt: float, system: PoissonSystem) -> None:
         """The pressure gradient, Eq. (F10), (F10a) or (F10c) (and (F10b) with
-        ``surface_repulsion``), and the velocity and position correction, Eq. (F13), in place."""
+        ``surface_repulsion``), and the velocity and position correction, Eq. (F13), into the
+        scratch ``_position`` and ``_velocity`` (:func:`kernels.commit_step` takes them)."""
         p = self.params
         if p.gradient == "conservative":
             kernels.conservative_pressure_correction(
                 self.position, self.velocity, self.pressure, self.kind, self.alive,
                 system.neighbours, self.constants, dt, self._position, self._velocity,
             )  # fmt: skip
-            self.position[:] = self._position
-            self.velocity[:] = self._velocity
             return
         surface = (  # the fluid particles on the free surface, for Eq. (F10b)
             self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None
@@ -600,20 +602,6 @@ class MPSSolver:
             system.neighbours, self.constants, dt, self._position, self._velocity,
             p.gradient == "corrected", surface,
         )  # fmt: skip
-        self.position[:] = self._position
-        self.velocity[:] = self._velocity
-
-    def _remove_escaped(self) -> None:
-        """Fluid particles outside the domain or no longer finite die: ``alive`` False, velocity
-        and pressure 0."""
-        leaving = self.alive & (self.kind == FLUID)
-        finite = np.isfinite(self.position).all(axis=1) & np.isfinite(self.velocity).all(axis=1)
-        inside = np.all((self.position >= self.domain_min) & (self.position <= self.domain_max), 1)
-        dying = leaving & ~(finite & inside)
-        if dying.any():
-            self.alive[dying] = False
-            self.velocity[dying] = 0.0
-            self.pressure[dying] = 0.0
 
     def neighbours(self, rows: np.ndarray, buffer: str | None = None) -> Neighbours:
         """The neighbours within ``search_radius`` of the live particles with ``rows[i]`` ((N,)

@@ -26,7 +26,8 @@ cannot hold.
   ``gpu_memory``, as :class:`jellysim.fluid.gpu.GPUSolver` allocates them, compared in the CUDA
   simulator in tests/unit/test_estimate.py), checked against the GPU's free memory; the host
   keeps the state's frame copies; the MPS step takes :data:`GPU_SECONDS_PER_PARTICLE_STEP` a
-  fluid particle, at least :data:`GPU_SECONDS_PER_STEP` (an H200's, docs/performance.md).
+  fluid particle, at least :data:`GPU_SECONDS_PER_STEP`, plus :data:`GPU_SECONDS_PER_BELL_STEP`
+  with a soft bell, and the run :data:`GPU_START_SECONDS` more (an H200's, docs/performance.md).
 
 A fluid that would need more than :data:`jellysim.fluid.frames.MAX_STEPS_PER_FRAME` MPS steps a
 frame, or tentacles more than their substep cap, are refused here (exit 2) whatever the machine.
@@ -79,12 +80,20 @@ log = logging.getLogger(__name__)
 # measurements on this project's 2-core host listed in docs/decisions.md ("Costs before they are
 # paid") and docs/performance.md.
 FLUID_SECONDS_PER_PARTICLE_STEP = 1.0e-5
-# The same on a GPU (fluid.device = "cuda"), from docs/performance.md's H200 figures with the
-# Jacobi-preconditioned CG: 2.3e-7 s a particle-step at a million particles (tank-3d, 4.3 steps/s),
-# 1.8e-7 at 57,600 (moon-jelly's water); below about 20,000 particles a step is its launches,
-# a few milliseconds whatever the count (dam-break-2d at 3,680 particles).
+# The same on a GPU (fluid.device = "cuda"), from docs/performance.md's H200 figures. The water's
+# step alone, with the two-level CG, takes 1.7e-7 s a fluid particle at 57,600 (moon-jelly's
+# water) and 0.7-1.0e-7 at a million; 2.5e-7 covers a whole run's frames too (moon-jelly-fine with
+# its tentacles and 6.9 GiB of writing: about 15 min projected, this estimate 16 min). Below about
+# 20,000 particles a step is its launches, a few milliseconds whatever the count (dam-break-2d).
 GPU_SECONDS_PER_PARTICLE_STEP = 2.5e-7
 GPU_SECONDS_PER_STEP = 5.0e-3
+# A soft bell's springs, muscle and implicit solve on the GPU add this much a step, whatever its
+# size (launches and a second cooperative solve): moon-jelly's three pulses took 74 s for 1,440
+# steps where its water alone steps in 9.6 ms (H200, 2026-11-27).
+GPU_SECONDS_PER_BELL_STEP = 3.0e-2
+# A GPU run compiles its CUDA kernels each time (Numba does not cache them) and builds its arrays
+# on the device: its set-up and first step took 10.9 s at 57,600 and 15.0 s at 1.1 M particles.
+GPU_START_SECONDS = 15.0
 TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP = 1.0e-6
 FRAME_SECONDS = 2.0e-3
 # A run estimated to take longer says so, in one line, before it starts.
@@ -630,6 +639,7 @@ def estimate(scene: Scene) -> Costs:
     frame_seconds = FRAME_SECONDS
     plan: list[str] = []
     gpu_memory: dict[str, int] = {}
+    start_seconds = 0.0
     if scene.fluid.model == "mps":
         counts = particle_counts(scene)
         fluid = fluid_plan(scene, counts)
@@ -643,6 +653,9 @@ def estimate(scene: Scene) -> Costs:
                 del memory[part]
             gpu_memory = _gpu_fluid_memory(scene, fluid, counts)
             step = max(GPU_SECONDS_PER_STEP, counts.fluid * GPU_SECONDS_PER_PARTICLE_STEP)
+            if scene.bell.model == "mass-spring":
+                step += GPU_SECONDS_PER_BELL_STEP
+            start_seconds = GPU_START_SECONDS
         else:
             step = counts.fluid * FLUID_SECONDS_PER_PARTICLE_STEP
         frame_seconds += fluid.steps * step
@@ -677,7 +690,8 @@ def estimate(scene: Scene) -> Costs:
         "checkpoints": 2 * checkpoint if frames - 1 > scene.solver.checkpoint_every else 0,
         "scene.toml": len(scene_to_toml(scene).encode()),
     }
-    return Costs(memory, disk, (frames - 1) * frame_seconds, frames, "; ".join(plan), gpu_memory)
+    seconds = start_seconds + (frames - 1) * frame_seconds
+    return Costs(memory, disk, seconds, frames, "; ".join(plan), gpu_memory)
 
 
 # --------------------------------------------------------------------------- the machine's limits
@@ -766,8 +780,10 @@ def check_costs(
 
 __all__ = [
     "FLUID_SECONDS_PER_PARTICLE_STEP",
+    "GPU_SECONDS_PER_BELL_STEP",
     "GPU_SECONDS_PER_PARTICLE_STEP",
     "GPU_SECONDS_PER_STEP",
+    "GPU_START_SECONDS",
     "LONG_RUN_SECONDS",
     "TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP",
     "Costs",

@@ -62,8 +62,8 @@ def report(solver: MPSSolver, stats: FrameStats) -> None:
         log.warning("%d particles left the domain (fluid/alive is False for them)", dead)
     if stats.seconds:
         total = sum(stats.seconds.values())
-        parts = ", ".join(f"{k} {v / total:.0%}" for k, v in stats.seconds.items())
-        log.info("fluid time per phase: %s", parts)
+        parts = ", ".join(f"{k} {v:.1f} s ({v / total:.0%})" for k, v in stats.seconds.items())
+        log.info("fluid time per phase: %s; %.1f s in all", parts, total)
 
 
 class Probes:
