@@ -110,18 +110,18 @@ def main() -> None:
     for case in args.case or list(CASES):
         preset, overrides = CASES[case]
         for solver in args.gpu_solver or [None]:
-            scene, fluid = _time_gpu(case, preset, overrides, solver, args.steps)
+            fluid = _time_gpu(case, preset, overrides, solver, args.steps)
         if args.cpu_threads > 0 and fluid <= 100_000:
-            _time_cpu(case, preset, overrides, scene, args.cpu_threads, args.steps)
-            if args.compare_steps > 0:
-                _compare(case, preset, overrides, scene, args.compare_steps)
+            _time_cpu(case, preset, overrides, args.cpu_threads, args.steps)
+            if args.compare_steps > 0:  # the preset's solver on both paths
+                _compare(case, preset, overrides, args.compare_steps)
 
 
 def _time_gpu(
     case: str, preset: str, overrides: dict[str, object], solver: str | None, steps: int
-) -> tuple[jellysim.Scene, int]:
+) -> int:
     """Times ``steps`` GPU steps of ``case`` with the pressure ``solver`` (None: the
-    preset's), prints them, and returns the scene and its fluid particles."""
+    preset's), prints them, and returns its fluid particles."""
     chosen = {} if solver is None else {"fluid.solver": solver}
     scene = jellysim.load_scene(preset, {**overrides, **chosen, "fluid.device": "cuda"})
     clock = time.perf_counter()
@@ -153,16 +153,11 @@ def _time_gpu(
             + ", ".join(f"{k} {np.round(v, 4)}" for k, v in probes.frame_values().items()),
             flush=True,
         )
-    return scene, fluid
+    return fluid
 
 
 def _time_cpu(
-    case: str,
-    preset: str,
-    overrides: dict[str, object],
-    scene: jellysim.Scene,
-    threads: int,
-    steps: int,
+    case: str, preset: str, overrides: dict[str, object], threads: int, steps: int
 ) -> None:
     """Times the CPU path of ``case`` on ``threads`` threads and prints it."""
     numba.set_num_threads(threads)
@@ -180,13 +175,12 @@ def _time_cpu(
     )
 
 
-def _compare(
-    case: str, preset: str, overrides: dict[str, object], scene: jellysim.Scene, steps: int
-) -> None:
-    """Steps the CPU and GPU paths ``steps`` times with the CPU's dt and prints how far
-    apart their fluid particles are."""
+def _compare(case: str, preset: str, overrides: dict[str, object], steps: int) -> None:
+    """Steps the CPU and GPU paths, each with the preset's pressure solver, ``steps`` times
+    with the CPU's dt and prints how far apart their fluid particles are."""
     cpu = FluidSimulation(jellysim.load_scene(preset, overrides)).solver
-    device = FluidSimulation(scene).solver
+    on_gpu = jellysim.load_scene(preset, {**overrides, "fluid.device": "cuda"})
+    device = FluidSimulation(on_gpu).solver
     rows = cpu.kind == FLUID
     for _ in range(steps):
         dt = cpu.stable_dt()
@@ -195,7 +189,8 @@ def _compare(
     apart = np.abs(cpu.position[rows] - device.position[rows]).max()
     speed = np.abs(cpu.velocity[rows]).max()
     print(
-        f"{case}: after {steps} steps (t = {cpu.time:.4f} s) the paths' fluid "
+        f"{case}: after {steps} steps (t = {cpu.time:.4f} s, the preset's "
+        f"{cpu.params.solver}) the paths' fluid "
         f"particles are at most {apart:.3g} m = {apart / cpu.params.l0:.3g} l0 apart "
         f"(largest speed {speed:.3g} m/s, velocities at most "
         f"{np.abs(cpu.velocity[rows] - device.velocity[rows]).max():.3g} m/s apart)",

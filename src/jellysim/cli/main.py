@@ -262,8 +262,11 @@ QUIET_LOGGERS = ("numba", "numba_cuda")
 
 def log_to_stderr() -> None:
     """A run's progress and notices (jellysim's INFO messages) on stderr, one per line; other
-    libraries' only from WARNING up."""
+    libraries' only from WARNING up (numba-cuda's as it is configured where
+    ``NUMBA_CUDA_LOG_LEVEL`` is set)."""
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+    if os.environ.get("NUMBA_CUDA_LOG_LEVEL"):  # asked for: numba-cuda's own handler shows it
+        return
     for name in QUIET_LOGGERS:
         logging.getLogger(name).setLevel(logging.WARNING)
 

@@ -61,12 +61,15 @@ except Exception as _error:  # noqa: BLE001 - any failure means: no CUDA here
     cuda = None  # type: ignore[assignment]
     _CUDA_ERROR = str(_error)
 
-# The coarse space's kernels, and every kernel in a small tank, launch a few blocks on purpose;
-# numba-cuda warns of each such launch ("Grid size 1 will likely result in GPU
-# under-utilization"), which tells a user of jellysim nothing they can act on.
-warnings.filterwarnings(
-    "ignore", message=r"Grid size \d+ will likely result in GPU under-utilization"
-)
+
+def quiet_small_grid_warnings() -> None:
+    """The coarse space's kernels, and every kernel in a small tank, launch a few blocks on
+    purpose; numba-cuda warns of each such launch ("Grid size 1 will likely result in GPU
+    under-utilization", after a terminal colour code where colorama is installed), which tells
+    a user of jellysim nothing they can act on. Called when a GPU solver is made."""
+    warnings.filterwarnings(
+        "ignore", message=r".*Grid size \d+ will likely result in GPU under-utilization"
+    )
 
 
 def simulated() -> bool:
@@ -1004,6 +1007,7 @@ class GPUSolver:
         reason = unavailable()
         if reason is not None:
             raise RuntimeError(reason)
+        quiet_small_grid_warnings()
         self._cuda = cuda
         self.k = _kernels()
         setup = solver_setup(params, positions, kinds)
@@ -1543,6 +1547,7 @@ __all__ = [
     "BLOCK",
     "GPUSolver",
     "no_coarse_space",
+    "quiet_small_grid_warnings",
     "simulated",
     "solver_on_gpu",
     "unavailable",

@@ -182,6 +182,10 @@ class MPSParameters:
             raise ValueError(f"acceleration_number must be > 0, not {self.acceleration_number}")
         if self.gravity is not None and len(self.gravity) != self.dim:
             raise ValueError(f"gravity needs {self.dim} components, not {len(self.gravity)}")
+        for name in ("domain_min", "domain_max"):  # kernels.commit_step reads dim of each
+            bound = getattr(self, name)
+            if bound is not None and len(bound) != self.dim:
+                raise ValueError(f"{name} needs {self.dim} components, not {len(bound)}")
 
     @property
     def beta(self) -> float:

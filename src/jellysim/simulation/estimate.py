@@ -25,9 +25,8 @@ cannot hold.
 - **On a GPU** (``fluid.device = "cuda"``): the solver's arrays are the GPU's (:class:`Costs`
   ``gpu_memory``, as :class:`jellysim.fluid.gpu.GPUSolver` allocates them, compared in the CUDA
   simulator in tests/unit/test_estimate.py), checked against the GPU's free memory; the host
-  keeps the state's frame copies; the MPS step takes :data:`GPU_SECONDS_PER_PARTICLE_STEP` a
-  fluid particle, at least :data:`GPU_SECONDS_PER_STEP`, plus :data:`GPU_SECONDS_PER_BELL_STEP`
-  with a soft bell, and the run :data:`GPU_START_SECONDS` more (an H200's, docs/performance.md).
+  keeps the state's frame copies; the MPS step takes :func:`gpu_step_seconds` and the run
+  :data:`GPU_START_SECONDS` more (an H200's, docs/performance.md).
 
 A fluid that would need more than :data:`jellysim.fluid.frames.MAX_STEPS_PER_FRAME` MPS steps a
 frame, or tentacles more than their substep cap, are refused here (exit 2) whatever the machine.
@@ -80,17 +79,20 @@ log = logging.getLogger(__name__)
 # measurements on this project's 2-core host listed in docs/decisions.md ("Costs before they are
 # paid") and docs/performance.md.
 FLUID_SECONDS_PER_PARTICLE_STEP = 1.0e-5
-# The same on a GPU (fluid.device = "cuda"), from docs/performance.md's H200 figures. The water's
-# step alone, with the two-level CG, takes 1.7e-7 s a fluid particle at 57,600 (moon-jelly's
-# water) and 0.7-1.0e-7 at a million; 2.5e-7 covers a whole run's frames too (moon-jelly-fine with
-# its tentacles and 6.9 GiB of writing: about 15 min projected, this estimate 16 min). Below about
-# 20,000 particles a step is its launches, a few milliseconds whatever the count (dam-break-2d).
-GPU_SECONDS_PER_PARTICLE_STEP = 2.5e-7
-GPU_SECONDS_PER_STEP = 5.0e-3
-# A soft bell's springs, muscle and implicit solve on the GPU add this much a step, whatever its
-# size (launches and a second cooperative solve): moon-jelly's three pulses took 74 s for 1,440
-# steps where its water alone steps in 9.6 ms (H200, 2026-11-27).
-GPU_SECONDS_PER_BELL_STEP = 3.0e-2
+# The same on a GPU (fluid.device = "cuda"), from docs/performance.md's H200 runs (2026-11-27).
+# The water's step is a fixed cost (launches and barriers) plus a cost per slot of the neighbour
+# lists (all particles x the lists' width), which the search and the Poisson rows scale with:
+# fitted to moon-jelly's water (84,588 particles, 9.6 ms) and tank-3d at a million (1,595,308,
+# 67.6 ms); tank-3d at 54,000 (11.2 ms measured, 11.6 by this) and SPHERIC Test 2 at 1.1 million
+# (113.6 ms, 99.7 by this; its lists are wider) were not fitted.
+GPU_SECONDS_PER_STEP = 6.3e-3
+GPU_SECONDS_PER_SLOT = 2.14e-10
+# A soft bell's springs, muscle and implicit solve on the GPU, a step: a fixed part plus a part
+# per spring, fitted to moon-jelly's three pulses (74 s for 1,440 steps, 17,556 springs) and
+# moon-jelly-fine's (about 16 min for 2,400 steps, 694,236 springs, projected from 62 of its
+# 120 frames with its tentacles). The runs' other work (the tentacles, the writing) is in them.
+GPU_SECONDS_PER_BELL_STEP = 2.4e-2
+GPU_SECONDS_PER_SPRING_STEP = 4.3e-7
 # A GPU run compiles its CUDA kernels each time (Numba does not cache them) and builds its arrays
 # on the device: its set-up and first step took 10.9 s at 57,600 and 15.0 s at 1.1 M particles.
 GPU_START_SECONDS = 15.0
@@ -538,16 +540,37 @@ GPU_SLOT_BYTES = INDEX + 2 * FLOAT
 GPU_SPRING_BYTES = 2 * LONG + 2 * FLOAT + 2 * (LONG + FLOAT) + 6 * FLOAT + 2 * FLOAT
 
 
+def gpu_step_seconds(scene: Scene, plan: FluidPlan, counts: Particles) -> float:
+    """The wall time of one MPS step on the GPU (s): :data:`GPU_SECONDS_PER_STEP` plus
+    :data:`GPU_SECONDS_PER_SLOT` a slot of the neighbour lists at their first width, and with a
+    soft bell :data:`GPU_SECONDS_PER_BELL_STEP` plus :data:`GPU_SECONDS_PER_SPRING_STEP` a
+    spring."""
+    seconds = GPU_SECONDS_PER_STEP + GPU_SECONDS_PER_SLOT * counts.total * _gpu_width(plan, counts)
+    if scene.bell.model == "mass-spring":
+        springs = _spring_count(scene, counts.bell)
+        seconds += GPU_SECONDS_PER_BELL_STEP + GPU_SECONDS_PER_SPRING_STEP * springs
+    return seconds
+
+
+def _gpu_width(plan: FluidPlan, counts: Particles) -> int:
+    """The GPU's neighbour lists' first width (:data:`jellysim.fluid.gpu.WIDTH_FACTOR` times the
+    lattice's neighbours within the search radius, plus 8)."""
+    from jellysim.fluid.gpu import WIDTH_FACTOR
+
+    p = plan.params
+    neighbours = lattice_reference(counts.dim, p.l0, p.neighbour_radius, p.lattice).count
+    return math.ceil(WIDTH_FACTOR * neighbours) + 8
+
+
 def _gpu_fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[str, int]:
     """The GPU path's device arrays (bytes by part), as :class:`jellysim.fluid.gpu.GPUSolver`
     and :class:`jellysim.bell.gpu_springs.GPUSprings` allocate them; the lists at their
     initial width (a search that finds a particle with more neighbours widens them)."""
-    from jellysim.fluid.gpu import COARSE_LARGEST, COARSE_PARTICLES, WIDTH_FACTOR
+    from jellysim.fluid.gpu import COARSE_LARGEST, COARSE_PARTICLES
 
     p = plan.params
     n, dim = counts.total, counts.dim
-    width = math.ceil(WIDTH_FACTOR * lattice_reference(dim, p.l0, p.neighbour_radius, p.lattice)
-                      .count) + 8  # fmt: skip
+    width = _gpu_width(plan, counts)
     f = scene.fluid
     behind = (WALL_LAYERS + DUMMY_LAYERS) * p.l0
     extent = [f.tank_width] + ([f.tank_depth] if dim == 3 else []) + [f.tank_height]
@@ -652,9 +675,7 @@ def estimate(scene: Scene) -> Costs:
             for part in ("neighbour lists", "cell grid", "Poisson matrix", "pressure solver"):
                 del memory[part]
             gpu_memory = _gpu_fluid_memory(scene, fluid, counts)
-            step = max(GPU_SECONDS_PER_STEP, counts.fluid * GPU_SECONDS_PER_PARTICLE_STEP)
-            if scene.bell.model == "mass-spring":
-                step += GPU_SECONDS_PER_BELL_STEP
+            step = gpu_step_seconds(scene, fluid, counts)
             start_seconds = GPU_START_SECONDS
         else:
             step = counts.fluid * FLUID_SECONDS_PER_PARTICLE_STEP
@@ -781,9 +802,11 @@ def check_costs(
 __all__ = [
     "FLUID_SECONDS_PER_PARTICLE_STEP",
     "GPU_SECONDS_PER_BELL_STEP",
-    "GPU_SECONDS_PER_PARTICLE_STEP",
+    "GPU_SECONDS_PER_SLOT",
+    "GPU_SECONDS_PER_SPRING_STEP",
     "GPU_SECONDS_PER_STEP",
     "GPU_START_SECONDS",
+    "gpu_step_seconds",
     "LONG_RUN_SECONDS",
     "TENTACLE_SECONDS_PER_PARTICLE_SUBSTEP",
     "Costs",
