@@ -112,6 +112,55 @@ def test_two_gpu_runs_agree_bit_for_bit() -> None:
         np.testing.assert_array_equal(second.state_arrays()[name], value, err_msg=name)
 
 
+_ONE_FRAME = """
+import sys
+import scenes
+import jellysim
+overrides = {**scenes.SWIM, "duration": 0.1, "fluid.device": "cuda"}
+with jellysim.run(jellysim.load_scene("moon-jelly", overrides), sys.argv[1], force=True) as result:
+    assert result.bell_centre.shape[0] == 2
+"""
+
+
+def _cached_kernels(folder) -> dict[str, float]:
+    """Numba's cached machine code of the GPU kernels under ``folder``: {file name: mtime}."""
+    return {
+        path.name: path.stat().st_mtime
+        for path in folder.rglob("*.nbc")
+        if path.name.startswith(("gpu_kernels.", "gpu_spring_kernels."))
+    }
+
+
+def test_a_second_run_loads_the_kernels_from_numbas_cache(tmp_path) -> None:
+    """The water's and the springs' kernels are compiled once per machine: a coarse moon jelly's
+    first frame on the GPU, in a new process with an empty NUMBA_CACHE_DIR, writes their machine
+    code there; a second process compiles none (no cache file added or rewritten)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    cache = tmp_path / "numba-cache"
+    tests = Path(__file__).resolve().parents[1]
+    env = {
+        **os.environ,
+        "NUMBA_CACHE_DIR": str(cache),
+        "PYTHONPATH": os.pathsep.join([str(tests), os.environ.get("PYTHONPATH", "")]),
+    }
+    for run in ("first", "second"):
+        done = subprocess.run(
+            [sys.executable, "-c", _ONE_FRAME, str(tmp_path / run)],
+            env=env, capture_output=True, text=True, timeout=600,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr[-3000:]
+        if run == "first":
+            written = _cached_kernels(cache)
+            names = {name.split("-")[0] for name in written}
+            assert "gpu_kernels.conjugate_gradient" in names, names  # the pressure's CG
+            assert any(name.startswith("gpu_spring_kernels.") for name in names), names
+    assert _cached_kernels(cache) == written
+
+
 def test_the_soft_bell_rises_as_on_the_cpu(tmp_path) -> None:
     """The tests' coarse moon jelly (tests/scenes.py SWIM, l0 = 0.25 m, without tentacles) for
     one 2 s pulse, its water on the GPU and on the CPU: the bell's rise agrees within 3 %.
