@@ -629,9 +629,10 @@ def test_commit_step_takes_the_corrected_state_and_kills_escaped_fluid_only() ->
     assert 10 < dying.sum() < n // 2  # the draw exercises both outcomes
 
     position, velocity = np.zeros((n, 3)), np.zeros((n, 3))
-    kernels.commit_step(
+    dead = kernels.commit_step(
         position, velocity, new_position, new_velocity, pressure, kind, alive, low, high
     )
+    assert dead == int((~expected_alive).sum())
     np.testing.assert_array_equal(position, new_position)
     np.testing.assert_array_equal(velocity, expected_velocity)
     np.testing.assert_array_equal(pressure, expected_pressure)

@@ -143,6 +143,35 @@ def test_coarse_operator_is_z_transpose_a_z(released) -> None:
     )
 
 
+def test_aggregates_and_members_are_numpys_sorts_without_sorting(monkeypatch) -> None:
+    """The aggregates' numbering by one pass over the lattice box's cells is np.unique's
+    inverse (rows scattered, empty cells between), as is the np.unique fallback for a box far
+    larger than the rows (a far group); the members' counting sort is a stable argsort."""
+    rng = np.random.default_rng(5)
+    origin, size = np.array([-0.31, -0.31, -0.31]), 0.04
+    compact = rng.uniform(-0.3, 0.5, (3000, 3))  # 20^3 cells, 3,000 rows: a pass over cells
+    spread = compact.copy()
+    spread[:40] += 7.0  # 195^3 cells: np.unique
+    passes = []
+    numbered = deflation._numbered_cells
+    monkeypatch.setattr(
+        deflation, "_numbered_cells", lambda *args: passes.append(1) or numbered(*args)
+    )
+    for position, dense in ((compact, True), (spread, False)):
+        passes.clear()
+        key, m = deflation.aggregates(position, origin, size)
+        assert bool(passes) == dense
+        cell = np.floor((position - origin) / size).astype(np.int64)
+        cell -= cell.min(axis=0)
+        linear = np.ravel_multi_index(tuple(cell.T), tuple(cell.max(axis=0) + 1))
+        unique, inverse = np.unique(linear, return_inverse=True)
+        np.testing.assert_array_equal(key, inverse.ravel())
+        assert m == unique.size
+        start, members = deflation._members(key, m)
+        np.testing.assert_array_equal(members, np.argsort(key, kind="stable"))
+        np.testing.assert_array_equal(np.diff(start), np.bincount(key, minlength=m))
+
+
 def test_the_deflated_solvers_unsorted_matrix_is_the_same_matrix() -> None:
     """Assembled for the deflated solver the rows keep neighbour order (diagonal first); as a
     matrix it is the sorted one, entry for entry."""

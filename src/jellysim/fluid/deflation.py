@@ -25,6 +25,7 @@ threads.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -43,10 +44,36 @@ def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[n
         return np.zeros(0, dtype=np.int64), 0
     cell = np.floor((position - origin) / size).astype(np.int64)
     cell -= cell.min(axis=0)
-    linear = np.ravel_multi_index(tuple(cell.T), tuple(cell.max(axis=0) + 1))
-    _, key = np.unique(linear, return_inverse=True)
+    shape = tuple(int(extent) for extent in cell.max(axis=0) + 1)
+    linear = np.ravel_multi_index(tuple(cell.T), shape).astype(np.int64)
+    if math.prod(shape) <= _DENSE_CELLS * position.shape[0] + 4096:
+        return _numbered_cells(linear, math.prod(shape))
+    _, key = np.unique(linear, return_inverse=True)  # a sparse spread: sort instead
     key = key.astype(np.int64).ravel()
     return key, int(key.max()) + 1
+
+
+# aggregates() numbers the occupied cells through an array over the lattice's box while it has
+# at most this many cells a row (one pass over rows and cells, no sort); beyond, np.unique.
+_DENSE_CELLS = 16
+
+
+@njit(cache=True)
+def _numbered_cells(linear: np.ndarray, cells: int) -> tuple[np.ndarray, int]:
+    """``np.unique(linear, return_inverse=True)``'s inverse for cells ``linear`` ((n,) int64 in
+    ``[0, cells)``): each occupied cell numbered in the order of its index. Returns (key, m)."""
+    number = np.full(cells, -1, dtype=np.int64)
+    for i in range(linear.shape[0]):
+        number[linear[i]] = 0
+    m = 0
+    for c in range(cells):
+        if number[c] == 0:
+            number[c] = m
+            m += 1
+    key = np.empty(linear.shape[0], dtype=np.int64)
+    for i in range(linear.shape[0]):
+        key[i] = number[linear[i]]
+    return key, m
 
 
 # Aggregates per chunk of the parallel loops that build W: each chunk keeps its own marker
@@ -96,45 +123,52 @@ def _restricted_rows(
     return indptr, indices, data
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _coarse_rows(
     indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, key: np.ndarray, m: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """E = W Z (m, m) in CSR with sorted columns, from W = Z^T A in CSR."""
-    seen = np.full(m, -1, dtype=np.int64)
+    """E = W Z (m, m) in CSR with sorted columns, from W = Z^T A in CSR. Rows in chunks of
+    aggregates in parallel (each chunk its own marker arrays, as :func:`_restricted_rows`):
+    each row is summed in W's order whatever the threads."""
+    chunks = (m + _CHUNK - 1) // _CHUNK
     coarse_indptr = np.zeros(m + 1, dtype=np.int64)
+    for c in prange(chunks):
+        seen = np.full(m, -1, dtype=np.int64)
+        for a in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
+            found = 0
+            for p in range(indptr[a], indptr[a + 1]):
+                b = key[indices[p]]
+                if seen[b] != a:
+                    seen[b] = a
+                    found += 1
+            coarse_indptr[a + 1] = found
     for a in range(m):
-        found = 0
-        for p in range(indptr[a], indptr[a + 1]):
-            b = key[indices[p]]
-            if seen[b] != a:
-                seen[b] = a
-                found += 1
-        coarse_indptr[a + 1] = coarse_indptr[a] + found
+        coarse_indptr[a + 1] += coarse_indptr[a]
     coarse_indices = np.empty(coarse_indptr[m], dtype=np.int64)
     coarse_data = np.zeros(coarse_indptr[m])
-    slot = np.full(m, -1, dtype=np.int64)
-    for a in range(m):
-        first = coarse_indptr[a]
-        end = first
-        for p in range(indptr[a], indptr[a + 1]):
-            b = key[indices[p]]
-            if slot[b] < first:
-                slot[b] = end
-                coarse_indices[end] = b
-                end += 1
-            coarse_data[slot[b]] += data[p]
-        # sort row a's columns (short rows: insertion sort, carrying the values)
-        for u in range(first + 1, end):
-            column = coarse_indices[u]
-            value = coarse_data[u]
-            v = u - 1
-            while v >= first and coarse_indices[v] > column:
-                coarse_indices[v + 1] = coarse_indices[v]
-                coarse_data[v + 1] = coarse_data[v]
-                v -= 1
-            coarse_indices[v + 1] = column
-            coarse_data[v + 1] = value
+    for c in prange(chunks):
+        slot = np.full(m, -1, dtype=np.int64)
+        for a in range(c * _CHUNK, min((c + 1) * _CHUNK, m)):
+            first = coarse_indptr[a]
+            end = first
+            for p in range(indptr[a], indptr[a + 1]):
+                b = key[indices[p]]
+                if slot[b] < first:  # first time in row a (earlier rows' are lower)
+                    slot[b] = end
+                    coarse_indices[end] = b
+                    end += 1
+                coarse_data[slot[b]] += data[p]
+            # sort row a's columns (short rows: insertion sort, carrying the values)
+            for u in range(first + 1, end):
+                column = coarse_indices[u]
+                value = coarse_data[u]
+                v = u - 1
+                while v >= first and coarse_indices[v] > column:
+                    coarse_indices[v + 1] = coarse_indices[v]
+                    coarse_data[v + 1] = coarse_data[v]
+                    v -= 1
+                coarse_indices[v + 1] = column
+                coarse_data[v + 1] = value
     return coarse_indptr, coarse_indices, coarse_data
 
 
@@ -148,10 +182,26 @@ class Restriction(NamedTuple):
 
 def restricted_operator(matrix: Matrix, key: np.ndarray, m: int) -> Restriction:
     """W = Z^T A for the aggregates ``key`` ((n,) int64, of :func:`aggregates`)."""
-    order = np.argsort(key, kind="stable")
-    members_start = np.zeros(m + 1, dtype=np.int64)
-    np.cumsum(np.bincount(key, minlength=m), out=members_start[1:])
-    return Restriction(*_restricted_rows(matrix, m, members_start, order))
+    members_start, members = _members(key, m)
+    return Restriction(*_restricted_rows(matrix, m, members_start, members))
+
+
+@njit(cache=True)
+def _members(key: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of each aggregate, by a counting sort of ``key`` ((n,) in ``[0, m)``): (start
+    (m + 1,), members (n,)), aggregate a's rows ``members[start[a]:start[a + 1]]`` in increasing
+    order (``np.argsort(key, kind="stable")``'s order, in one pass)."""
+    start = np.zeros(m + 1, dtype=np.int64)
+    for i in range(key.shape[0]):
+        start[key[i] + 1] += 1
+    for a in range(m):
+        start[a + 1] += start[a]
+    cursor = start[:m].copy()
+    members = np.empty(key.shape[0], dtype=np.int64)
+    for i in range(key.shape[0]):
+        members[cursor[key[i]]] = i
+        cursor[key[i]] += 1
+    return start, members
 
 
 def coarse_operator(restriction: Restriction, key: np.ndarray, m: int) -> scipy.sparse.csc_matrix:

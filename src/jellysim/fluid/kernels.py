@@ -309,12 +309,14 @@ def commit_step(
     alive: np.ndarray,
     domain_min: np.ndarray,
     domain_max: np.ndarray,
-) -> None:
+) -> int:
     """The step's corrected state into ``position`` and ``velocity``; then live fluid particles
     outside [``domain_min``, ``domain_max``] or no longer finite (position or velocity) die:
-    ``alive`` False, velocity and pressure 0. One parallel pass (it was serial NumPy, the part of
-    a step that scaled least on 16 threads, docs/performance.md)."""
+    ``alive`` False, velocity and pressure 0. Returns the particles not alive after it. One
+    parallel pass (it was serial NumPy, the part of a step that scaled least on 16 threads,
+    docs/performance.md)."""
     n, dim = position.shape
+    dead = 0
     for i in prange(n):
         keep = True
         for d in range(dim):
@@ -329,6 +331,9 @@ def commit_step(
             for d in range(dim):
                 velocity[i, d] = 0.0
             pressure[i] = 0.0
+        if not alive[i]:
+            dead += 1
+    return dead
 
 
 @njit(cache=True, parallel=True, fastmath=FAST)

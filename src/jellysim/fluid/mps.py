@@ -509,11 +509,10 @@ class MPSSolver:
             self._correct(dt, system)
             self.time += dt
             # the corrected state; particles that left the domain or stopped being finite die
-            kernels.commit_step(
+            stats.dead = kernels.commit_step(
                 self.position, self.velocity, self._position, self._velocity, self.pressure,
                 self.kind, self.alive, self.domain_min, self.domain_max,
             )  # fmt: skip
-            stats.dead = int((~self.alive).sum())
         return stats
 
     def _start_neighbours(self) -> Neighbours:
