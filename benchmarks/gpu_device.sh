@@ -11,6 +11,8 @@
 #   spheric    SPHERIC Test 2 at 1,121,729 fluid particles, its pressure probes read each step
 #   threads    the 3-D tank's CPU step on 16, 8, 4, 2 and 1 threads (bench_fluid.py)
 #   dam-break  dam-break-2d run on the GPU and plotted against Martin & Moyce
+#   warm       dam-break-2d on the GPU twice with a new NUMBA_CACHE_DIR: a machine's first run
+#              (every kernel compiled) against a later one (loaded from Numba's cache)
 #   fine       moon-jelly-fine for three pulses on the GPU (issue 28's 10 minutes: a session
 #              of its own; the tests part leaves its test in tests/gpu out)
 # Limits and options from the environment: TESTS_LIMIT (s, default 240), STEPS_LIMIT (s,
@@ -54,11 +56,16 @@ for part in $parts; do
       say "== jellysim run dam-break-2d --device cuda"
       ( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"
       timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log" ;;
+    warm)
+      say "== the kernels' cache: jellysim run dam-break-2d --device cuda, a first and a second run"
+      for run in first second; do
+        ( time NUMBA_CACHE_DIR="$out/numba-cache" timeout 120 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d-warm --force --quiet ) 2>&1 | grep -E "^real|Error|error" | sed "s/^/$run run: /" | tee -a "$out/log"
+      done ;;
     fine)
       say "== moon-jelly-fine: three pulses, no tentacles (issue 28: at most 600 s; tests/gpu's test_moon_jelly_fine_* is the same run)"
       timeout 580 $py benchmarks/bell_pulses.py --full --preset moon-jelly-fine --pulses 3 --no-tentacles --set fluid.device='"cuda"' --out /tmp/fine-pulses 2>&1 | tee "$out/fine.log" | grep -E "time per phase|as it is|pulse |simulating|Error|error" | tail -12 | tee -a "$out/log" ;;
     *)
-      say "unknown part: $part (tests steps moon-jelly spheric threads dam-break fine)" ;;
+      say "unknown part: $part (tests steps moon-jelly spheric threads dam-break warm fine)" ;;
   esac
 done
 say "== done"
