@@ -12,7 +12,7 @@
 #   threads    the 3-D tank's CPU step on 16, 8, 4, 2 and 1 threads (bench_fluid.py)
 #   dam-break  dam-break-2d run on the GPU and plotted against Martin & Moyce
 #   warm       dam-break-2d on the GPU twice with a new NUMBA_CACHE_DIR: a machine's first run
-#              (every kernel compiled) against a later one (loaded from Numba's cache)
+#              (every kernel compiled, the CPU's too) against a later one (all from the cache)
 #   fine       moon-jelly-fine for three pulses on the GPU (issue 28's 10 minutes: a session
 #              of its own; the tests part leaves its test in tests/gpu out)
 # Limits and options from the environment: TESTS_LIMIT (s, default 240), STEPS_LIMIT (s,
@@ -58,6 +58,7 @@ for part in $parts; do
       timeout 40 $py -m jellysim plot /tmp/db2d --out "$out/plots" 2>&1 | tail -5 | tee -a "$out/log" ;;
     warm)
       say "== the kernels' cache: jellysim run dam-break-2d --device cuda, a first and a second run"
+      rm -rf "$out/numba-cache"  # a new cache: the first run compiles every kernel, CPU's and GPU's
       for run in first second; do
         ( time NUMBA_CACHE_DIR="$out/numba-cache" timeout 120 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d-warm --force --quiet ) 2>&1 | grep -E "^real|Error|error" | sed "s/^/$run run: /" | tee -a "$out/log"
       done ;;

@@ -48,7 +48,7 @@ def _shared_array(self: Any, shape: Any, dtype: Any) -> Any:
     The simulator's own is not thread-safe: two threads of a block that reach a
     ``cuda.shared.array`` line together can each allocate one, and then share nothing (seen at
     0.1 ms switches as a scan of garbage; at 5 ms the first thread always allocated first). One
-    array a call site (file, line) and block, as there."""
+    array a call site (file, line) and launch, as there."""
     import numpy as np
     from numba.core import types
     from numba.np import numpy_support

@@ -113,12 +113,32 @@ def test_two_gpu_runs_agree_bit_for_bit() -> None:
 
 
 _ONE_FRAME = """
+import json
 import sys
+
 import scenes
+import tomli_w
+
 import jellysim
+from jellysim.bell import gpu_spring_kernels
+from jellysim.config.scenes import scene_source_tree
+from jellysim.fluid import gpu_kernels
+
+bell_only = sys.argv[1] + ".toml"  # no tentacles: the GPU's kernels, few of the CPU's
+with open(bell_only, "w") as file:
+    file.write(tomli_w.dumps({**scene_source_tree("moon-jelly"), "tentacles": {"count": 0}}))
 overrides = {**scenes.SWIM, "duration": 0.1, "fluid.device": "cuda"}
-with jellysim.run(jellysim.load_scene("moon-jelly", overrides), sys.argv[1], force=True) as result:
+del overrides["tentacles.count"]
+with jellysim.run(jellysim.load_scene(bell_only, overrides), sys.argv[1], force=True) as result:
     assert result.bell_centre.shape[0] == 2
+counts = {}  # kernel: [loaded from the cache, compiled] (device functions count in neither)
+for module in (gpu_kernels, gpu_spring_kernels):
+    for name, kernel in module.KERNELS.items():
+        hits = sum(kernel._cache_hits.values()) if hasattr(kernel, "_cache_hits") else 0
+        misses = sum(kernel._cache_misses.values()) if hasattr(kernel, "_cache_misses") else 0
+        if hits or misses:
+            counts[module.__name__.rsplit(".", 1)[-1] + "." + name] = [hits, misses]
+print("KERNELS " + json.dumps(counts))
 """
 
 
@@ -133,8 +153,11 @@ def _cached_kernels(folder) -> dict[str, float]:
 
 def test_a_second_run_loads_the_kernels_from_numbas_cache(tmp_path) -> None:
     """The water's and the springs' kernels are compiled once per machine: a coarse moon jelly's
-    first frame on the GPU, in a new process with an empty NUMBA_CACHE_DIR, writes their machine
-    code there; a second process compiles none (no cache file added or rewritten)."""
+    bell (no tentacles) for a frame on the GPU, in a new process with an empty NUMBA_CACHE_DIR,
+    compiles every kernel it launches and writes it there; a second process loads every one of
+    them from the cache (Numba's per-kernel counts: no compilation) and adds or rewrites no
+    cache file."""
+    import json
     import os
     import subprocess
     import sys
@@ -142,22 +165,27 @@ def test_a_second_run_loads_the_kernels_from_numbas_cache(tmp_path) -> None:
 
     cache = tmp_path / "numba-cache"
     tests = Path(__file__).resolve().parents[1]
-    env = {
-        **os.environ,
-        "NUMBA_CACHE_DIR": str(cache),
-        "PYTHONPATH": os.pathsep.join([str(tests), os.environ.get("PYTHONPATH", "")]),
-    }
+    paths = [str(tests), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": os.pathsep.join(paths)}
+    counts = {}
     for run in ("first", "second"):
         done = subprocess.run(
             [sys.executable, "-c", _ONE_FRAME, str(tmp_path / run)],
             env=env, capture_output=True, text=True, timeout=600,
         )  # fmt: skip
         assert done.returncode == 0, done.stderr[-3000:]
+        line = next(x for x in done.stdout.splitlines() if x.startswith("KERNELS "))
+        counts[run] = json.loads(line.removeprefix("KERNELS "))
         if run == "first":
             written = _cached_kernels(cache)
-            names = {name.split("-")[0] for name in written}
-            assert "gpu_kernels.conjugate_gradient" in names, names  # the pressure's CG
-            assert any(name.startswith("gpu_spring_kernels.") for name in names), names
+    first, second = counts["first"], counts["second"]
+    assert "gpu_kernels.conjugate_gradient" in first and "gpu_spring_kernels.implicit" in first
+    assert all(misses > 0 for _, misses in first.values()), first  # compiled, all of them
+    assert set(second) == set(first)
+    assert all(hits > 0 and misses == 0 for hits, misses in second.values()), second
+    assert {name.split("-")[0] for name in written} >= {
+        "gpu_kernels.conjugate_gradient", "gpu_spring_kernels.implicit"
+    }  # fmt: skip
     assert _cached_kernels(cache) == written
 
 

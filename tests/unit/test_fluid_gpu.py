@@ -92,6 +92,18 @@ def _stirred(cpu: MPSSolver) -> dict[str, np.ndarray]:
     return state
 
 
+def test_the_kernels_constants_are_their_sources() -> None:
+    """gpu_kernels writes the constants its kernels read (so that an edit of one changes that
+    file and Numba compiles the cached kernels again): they are the values the rest of the
+    package uses."""
+    from jellysim.fluid import geometry, gpu_kernels, kernels
+
+    assert gpu_kernels.BLOCK == gpu.BLOCK
+    kinds = (gpu_kernels.FLUID, gpu_kernels.WALL, gpu_kernels.DUMMY)
+    assert kinds == (geometry.FLUID, geometry.WALL, geometry.DUMMY)
+    assert gpu_kernels.CORRECTION_MIN_DETERMINANT == kernels.CORRECTION_MIN_DETERMINANT
+
+
 def test_gpu_step_matches_cpu_with_collisions_and_viscosity() -> None:
     """A stirred column (:func:`_stirred`) with hydrostatic-2d's model: the collision, the
     viscous term and the either-density surface all act in the step (checked on the CPU: with

@@ -10,9 +10,13 @@ import math
 
 from numba import cuda, float64, int32
 
-from jellysim.fluid.geometry import DUMMY, FLUID, WALL
-from jellysim.fluid.gpu import BLOCK
-from jellysim.fluid.kernels import CORRECTION_MIN_DETERMINANT
+# The constants the kernels read, written here and not imported: Numba compiles a global's value
+# into the machine code and throws a cached kernel away only when the kernel's own file changes,
+# so a value imported from another module could change under a stale cache. A unit test
+# (tests/unit/test_fluid_gpu.py) holds them equal to their sources.
+BLOCK = 128  # jellysim.fluid.gpu.BLOCK: threads of a block
+FLUID, WALL, DUMMY = 0, 1, 2  # jellysim.fluid.geometry's particle kinds
+CORRECTION_MIN_DETERMINANT = 0.3  # jellysim.fluid.kernels'
 
 
 @cuda.jit(device=True)
