@@ -1,6 +1,7 @@
 """MPS speed: steps per second and the time per phase at about 57,000 fluid particles.
 
-    .venv/bin/python benchmarks/bench_fluid.py [--steps 20] [--threads N] [--solver NAME]
+    .venv/bin/python benchmarks/bench_fluid.py [--steps 20] [--threads N] [--chunksize N]
+        [--solver NAME]
         [--case NAME ...] [--set KEY=VALUE ...] [--compare-solvers]
 
 The dam break of dam-break-2d at a / l0 = 158 with the preset's own scheme (hexagonal lattice,
@@ -59,6 +60,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--threads", type=int, default=numba.config.NUMBA_NUM_THREADS)
+    parser.add_argument(
+        "--chunksize", type=int, default=0,
+        help="iterations a chunk of every parallel loop (numba.set_parallel_chunksize; 0, "
+        "Numba's default: the loop split evenly between the threads once); the same bits",
+    )  # fmt: skip
     parser.add_argument("--case", choices=tuple(CASES), action="append")
     parser.add_argument("--solver", choices=("iccg", "cg", "deflated"))
     parser.add_argument("--compare-solvers", action="store_true")
@@ -68,9 +74,10 @@ def main() -> None:
     )  # fmt: skip
     args = parser.parse_args()
     numba.set_num_threads(args.threads)
+    numba.set_parallel_chunksize(args.chunksize)
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores; numba {numba.__version__}, "
-        f"threads {numba.get_num_threads()}"
+        f"threads {numba.get_num_threads()}, chunk size {args.chunksize}"
     )
     for name in args.case or list(CASES):
         preset, defaults = CASES[name]

@@ -17,7 +17,9 @@
 #              of its own; the tests part leaves its test in tests/gpu out)
 # Limits and options from the environment: TESTS_LIMIT (s, default 240), STEPS_LIMIT (s,
 # default 220), CPU_THREADS (16), GPU_SOLVERS (e.g. "--gpu-solver deflated --gpu-solver cg":
-# the steps part times the GPU with each pressure solver; default the presets').
+# the steps part times the GPU with each pressure solver; default the presets'), THREADS (the
+# threads part's counts, default "16 8 4 2 1"), CHUNKSIZE (its parallel loops' chunk size, 0);
+# NUMBA_THREADING_LAYER=tbb with the tbb wheel carried compares TBB's dynamic scheduling.
 #   bash benchmarks/gpu_device.sh OUTDIR [PART ...]   (no part: tests steps moon-jelly, about
 #   9 minutes at most, which a 15-minute device session holds with its start)
 # Each part has a time limit, so that one stuck part leaves the others' figures.
@@ -50,7 +52,7 @@ for part in $parts; do
     threads)
       say "== CPU threads: bench_fluid.py --case tank-3d"
       for threads in ${THREADS-16 8 4 2 1}; do
-        timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
+        timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads --chunksize ${CHUNKSIZE-0} 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
       done ;;
     dam-break)
       say "== jellysim run dam-break-2d --device cuda"
