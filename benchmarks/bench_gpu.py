@@ -3,7 +3,7 @@ time per phase, particle-steps per second and wall time per simulated second, an
 two paths' water is apart after the same steps.
 
     python benchmarks/bench_gpu.py [--case NAME ...] [--steps 20] [--cpu-threads 16]
-        [--compare-steps 20] [--gpu-solver deflated|cg ...]
+        [--compare-steps 20] [--gpu-solver deflated|cg ...] [--grid-blocks N ...]
 
 Cases, each from rest at its preset's scheme (the pressure to a relative residual of 1e-8):
 
@@ -19,6 +19,9 @@ Cases, each from rest at its preset's scheme (the pressure to a relative residua
 
 ``--gpu-solver deflated|cg`` (repeatable) times the GPU with each pressure solver in turn:
 CG with Jacobi and the coarse correction, or with Jacobi alone (default: the preset's).
+``--grid-blocks N`` (repeatable) times the GPU again with each phase's cooperative grid cut to
+at most N blocks, each N in turn on the same water (its steps follow the default's): fewer
+blocks meet sooner at a grid barrier, more hide the memory's latency better.
 ``--cpu-threads N`` (0: none) also times the CPU path on N threads for the cases under 100,000
 particles; ``--compare-steps K`` then steps both paths K times with the CPU's dt and prints the
 largest distance between their fluid particles (the paths sum in other orders and solve with
@@ -94,6 +97,13 @@ def main() -> None:
         action="append",
         help="the GPU's pressure solver, each given timed in turn (default: the preset's)",
     )
+    parser.add_argument(
+        "--grid-blocks",
+        type=int,
+        action="append",
+        default=[],
+        help="the cooperative kernels' blocks at most, each given timed in turn after the default",
+    )
     args = parser.parse_args()
     from jellysim.fluid import gpu
 
@@ -110,7 +120,7 @@ def main() -> None:
     for case in args.case or list(CASES):
         preset, overrides = CASES[case]
         for solver in args.gpu_solver or [None]:
-            fluid = _time_gpu(case, preset, overrides, solver, args.steps)
+            fluid = _time_gpu(case, preset, overrides, solver, args.steps, args.grid_blocks)
         if args.cpu_threads > 0 and fluid <= 100_000:
             _time_cpu(case, preset, overrides, args.cpu_threads, args.steps)
             if args.compare_steps > 0:  # the preset's solver on both paths
@@ -118,10 +128,16 @@ def main() -> None:
 
 
 def _time_gpu(
-    case: str, preset: str, overrides: dict[str, object], solver: str | None, steps: int
+    case: str,
+    preset: str,
+    overrides: dict[str, object],
+    solver: str | None,
+    steps: int,
+    grid_blocks: list[int],
 ) -> int:
     """Times ``steps`` GPU steps of ``case`` with the pressure ``solver`` (None: the
-    preset's), prints them, and returns its fluid particles."""
+    preset's), then as many more with each of ``grid_blocks`` (each phase's cooperative grid
+    at most that many blocks), prints them, and returns its fluid particles."""
     chosen = {} if solver is None else {"fluid.solver": solver}
     scene = jellysim.load_scene(preset, {**overrides, **chosen, "fluid.device": "cuda"})
     clock = time.perf_counter()
@@ -134,18 +150,23 @@ def _time_gpu(
     if after_step is not None:
         after_step(0.0)  # compiles the probes' kernel
     first = time.perf_counter() - clock
-    wall, seconds, iterations, simulated = _time_steps(device, steps, after_step)
-    phases = ", ".join(f"{k} {1000 * v / steps:.2f} ms" for k, v in seconds.items())
-    print(
-        f"{case} GPU ({scene.fluid.solver}): {fluid} fluid + {len(device.kind) - fluid} "
-        f"wall/dummy particles (set-up and first step {first:.1f} s); {steps / wall:.1f} "
-        f"steps/s, {fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s per "
-        f"simulated second (dt {simulated / steps:.3g} s); CG iterations "
-        f"{np.mean(iterations):.0f} (mean); per step: {phases}; neighbour-list width "
-        f"{device.width}"
-        + ("" if probes is None else f"; {len(probes.pressure_names)} pressure probes read"),
-        flush=True,
-    )
+    chosen_blocks = dict(getattr(device, "_blocks", {}))  # each cooperative grid, the most
+    for most in [None, *grid_blocks]:
+        if most is not None:
+            device._blocks.update({k: min(v, most) for k, v in chosen_blocks.items()})
+        wall, seconds, iterations, simulated = _time_steps(device, steps, after_step)
+        phases = ", ".join(f"{k} {1000 * v / steps:.2f} ms" for k, v in seconds.items())
+        grids = ", ".join(f"{k} {v}" for k, v in getattr(device, "_blocks", {}).items())
+        print(
+            f"{case} GPU ({scene.fluid.solver}): {fluid} fluid + {len(device.kind) - fluid} "
+            f"wall/dummy particles (set-up and first step {first:.1f} s); {steps / wall:.1f} "
+            f"steps/s, {fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s "
+            f"per simulated second (dt {simulated / steps:.3g} s); CG iterations "
+            f"{np.mean(iterations):.0f} (mean); per step: {phases}; neighbour-list width "
+            f"{device.width}; blocks: {grids}"
+            + ("" if probes is None else f"; {len(probes.pressure_names)} pressure probes read"),
+            flush=True,
+        )
     if probes is not None:  # heights now, pressures the mean over the timed steps
         probes.end_frame()
         print(

@@ -15,9 +15,14 @@
 #              (every kernel compiled, the CPU's too) against a later one (all from the cache)
 #   fine       moon-jelly-fine for three pulses on the GPU (issue 28's 10 minutes: a session
 #              of its own; the tests part leaves its test in tests/gpu out)
+#   baseline   the steps part's GPU cases (no CPU) on another version's package, BASELINE (a
+#              directory holding its src/jellysim, e.g. from `git archive COMMIT src | tar -x
+#              -C .baseline`, carried): a comparison on the same card as the steps part
 # Limits and options from the environment: TESTS_LIMIT (s, default 240), STEPS_LIMIT (s,
 # default 220), CPU_THREADS (16), GPU_SOLVERS (e.g. "--gpu-solver deflated --gpu-solver cg":
-# the steps part times the GPU with each pressure solver; default the presets'), THREADS (the
+# the steps part times the GPU with each pressure solver; default the presets'), GRID_BLOCKS
+# (e.g. "--grid-blocks 132 --grid-blocks 264": the steps part times each cooperative grid cut
+# to that many blocks too, after the GPU's most), THREADS (the
 # threads part's counts, default "16 8 4 2 1"), CHUNKSIZE (its parallel loops' chunk size, 0);
 # NUMBA_THREADING_LAYER=tbb with the tbb wheel carried compares TBB's dynamic scheduling.
 #   bash benchmarks/gpu_device.sh OUTDIR [PART ...]   (no part: tests steps moon-jelly, about
@@ -42,7 +47,7 @@ for part in $parts; do
       JELLYSIM_TEST_GPU=1 timeout ${TESTS_LIMIT-240} $py -m pytest -q -p no:cacheprovider tests/gpu -k "not moon_jelly_fine" 2>&1 | tee "$out/tests.log" | tail -15 | tee -a "$out/log" ;;
     steps)
       say "== bench_gpu.py"
-      timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 ${GPU_SOLVERS-} 2>&1 | tee -a "$out/log" ;;
+      timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 ${GPU_SOLVERS-} ${GRID_BLOCKS-} 2>&1 | tee -a "$out/log" ;;
     moon-jelly)
       say "== moon-jelly, three pulses on the GPU (bell_pulses.py --full --pulses 3 --no-tentacles)"
       timeout 150 $py benchmarks/bell_pulses.py --full --pulses 3 --no-tentacles --set fluid.device='"cuda"' 2>&1 | tee "$out/moon-jelly.log" | grep -E "time per phase|as it is|pulse |Error|error" | tee -a "$out/log" ;;
@@ -67,8 +72,15 @@ for part in $parts; do
     fine)
       say "== moon-jelly-fine: three pulses, no tentacles (issue 28: at most 600 s; tests/gpu's test_moon_jelly_fine_* is the same run)"
       timeout 580 $py benchmarks/bell_pulses.py --full --preset moon-jelly-fine --pulses 3 --no-tentacles --set fluid.device='"cuda"' --out /tmp/fine-pulses 2>&1 | tee "$out/fine.log" | grep -E "time per phase|as it is|pulse |simulating|Error|error" | tail -12 | tee -a "$out/log" ;;
+    baseline)
+      say "== bench_gpu.py on the baseline package ${BASELINE-unset}"
+      if [ -d "${BASELINE-}/src/jellysim" ]; then
+        PYTHONPATH="$(cd "$BASELINE" && pwd)/src:${PYTHONPATH-}" timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 ${GPU_SOLVERS-} 2>&1 | tee -a "$out/log"
+      else
+        say "no BASELINE/src/jellysim: set BASELINE to a carried directory"
+      fi ;;
     *)
-      say "unknown part: $part (tests steps moon-jelly spheric threads dam-break warm fine)" ;;
+      say "unknown part: $part (tests steps moon-jelly spheric threads dam-break warm fine baseline)" ;;
   esac
 done
 say "== done"

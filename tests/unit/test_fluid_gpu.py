@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from jellysim.fluid import gpu
-from jellysim.fluid.geometry import FLUID, tank, water_block
+from jellysim.fluid.geometry import FLUID, WALL, tank, water_block
 from jellysim.fluid.mps import MPSParameters, MPSSolver
 
 pytestmark = pytest.mark.skipif(
@@ -137,6 +137,42 @@ def test_gpu_step_matches_cpu_with_collisions_and_viscosity() -> None:
         else:
             apart = np.abs(other.velocity[fluid] - cpu.velocity[fluid]).max()
             assert apart > 1e3 * 1e-6 * 9.81 * dt, change
+
+
+def test_a_step_is_its_six_phases_in_six_launches(monkeypatch) -> None:
+    """A step launches its six phases and nothing else, each one cooperative kernel (the two
+    searches, the explicit phase, the assembly, the CG, the correction: docs/decisions.md, "A
+    GPU step in six launches"), and reads five small arrays back (each search's widest row,
+    the solve's residual, the counters, the extent). The next step's dt is the correction
+    phase's extent: stable_dt launches nothing then, and gives what its own kernel gives."""
+    from numba.cuda.simulator.cudadrv.devicearray import FakeCUDAArray
+
+    positions, kinds = _particles(2, "square")
+    device = gpu.GPUSolver(MPSParameters(dim=2, l0=L0), positions, kinds)
+    dt = device.stable_dt()
+    launched: list[str] = []
+
+    class Counting(dict):
+        def __getitem__(self, name: str):
+            launched.append(name)
+            return super().__getitem__(name)
+
+    reads = []
+    download = FakeCUDAArray.copy_to_host
+    monkeypatch.setattr(device, "k", Counting(device.k))
+    monkeypatch.setattr(
+        FakeCUDAArray, "copy_to_host", lambda self, *a, **k: reads.append(1) or download(self)
+    )
+    device.step(dt)
+    phases = ["explicit_phase", "assembly_phase", "conjugate_gradient", "correction_phase"]
+    assert launched == ["neighbour_search", phases[0], "neighbour_search", *phases[1:]]
+    assert len(reads) == 5
+    launched.clear()
+    after_step = device.stable_dt()
+    assert launched == []
+    device._extent_host = None  # as after a restore: the extent kernel
+    assert device.stable_dt() == after_step
+    assert launched == ["extent"]
 
 
 @pytest.mark.parametrize("case", list(CASES))
@@ -265,15 +301,28 @@ def test_a_two_level_run_resumes_to_the_bit(monkeypatch) -> None:
 
 def test_neighbour_lists_match_the_cell_search_and_grow() -> None:
     """Each row of the GPU's fixed-width list holds the CPU cell search's neighbours, in
-    particle order within a cell; a width too small is grown and the search repeated."""
+    particle order within a cell; a width too small is grown and the search repeated. A wall
+    particle far from the tank widens the cell grid to several tiles of BLOCK cells, so the
+    cells' starts carry from tile to tile (the fused search's tile stages)."""
     from jellysim.fluid.neighbours import search_neighbours
 
     positions, kinds = _particles(2, "square")
+    positions = np.concatenate([positions, [[1.0, 1.0]]])
+    kinds = np.concatenate([kinds, [WALL]]).astype(np.int8)
     params = MPSParameters(dim=2, l0=L0)
     device = gpu.GPUSolver(params, positions, kinds)
     device._allocate_lists(4)  # far too narrow: the search must grow it
     device._search(device._d_position, device._rows_all, device._wet)
     assert device.width > 4
+    cell = device._cell.copy_to_host()
+    assert device._tile_sums.shape[0] >= 5  # tiles of BLOCK cells
+    per_cell = np.bincount(cell, minlength=device._cells)
+    start = device._start.copy_to_host()
+    np.testing.assert_array_equal(start, np.concatenate([[0], np.cumsum(per_cell)]))
+    member = device._member.copy_to_host()
+    for c in np.flatnonzero(per_cell):
+        within = member[start[c] : start[c + 1]]
+        np.testing.assert_array_equal(within, np.flatnonzero(cell == c))
     count = device._list_count.copy_to_host()
     index = device._index.copy_to_host()
     distance = device._distance.copy_to_host()

@@ -104,7 +104,7 @@ class GPUSprings:
             self._b, self._x = da(rows3), da(rows3)
             self._r, self._z, self._d, self._q = da(rows3), da(rows3), da(rows3), da(rows3)
             self._partial = da((2, _grid(rows3), 3))
-            self._out = da(3)
+            self._out = da(4)
             self._blocks = 0
 
     def set_reaction(self, reaction: np.ndarray | None) -> None:
@@ -174,7 +174,7 @@ class GPUSprings:
         if self._blocks == 0:
             self._blocks = cooperative_blocks(kernel, args, _grid(3 * self.particles))
         kernel[self._blocks, BLOCK](*args)
-        iterations, rr, bb = self._out.copy_to_host()
+        iterations, rr, bb, _ = self._out.copy_to_host()
         residual = 0.0 if bb == 0.0 else math.sqrt(rr / bb)
         return int(iterations), residual
 

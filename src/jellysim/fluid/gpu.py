@@ -11,6 +11,16 @@ neighbour lists are of fixed width: ``width`` slots a particle (grown, and the s
 when a particle has more neighbours), in the order of the cells around it and of particle
 index within a cell, so that each particle sums its neighbours in one fixed order.
 
+A step is six cooperative launches (each kernel's blocks all resident, the grid meeting at
+barriers between its stages, :mod:`jellysim.fluid.gpu_kernels`): the neighbour search at r^k,
+the explicit phase, the search at r*, the Poisson system's assembly, the solve and the
+correction; and five small reads: each search's widest row, the solve's residual, and the
+step's counters with the new state's extent (the next step's dt). A search repeated with wider
+lists, a new coarse space, and the first dt after a start or a restore add theirs. A launch
+costs tens of microseconds on the host, more than most stages' work at 57,000 particles; the
+step was about forty launches until 2026-11-28, with the same arithmetic but for the coarse
+correction's sums (docs/decisions.md).
+
 Reproducible: no floating-point atomic sums. A dot product sums within each block of
 :data:`BLOCK` threads by a fixed tree; after a grid barrier every block sums the blocks' sums
 in one fixed order (each thread a strided share, then the tree). The atomics left are order-free:
@@ -98,8 +108,6 @@ COARSE_LARGEST = 2500
 COARSE_PARTICLES = 200
 COARSE_REFRESH = 200
 COARSE_STALE = 1.25
-# The dense product with E^-1 in this many chunks of columns, so that m x CHUNKS threads share it.
-COARSE_CHUNKS = 32
 
 _KERNELS: dict[str, Any] | None = None
 
@@ -230,17 +238,18 @@ class GPUSolver:
         self._rows = da(n, dtype=np.bool_)
         self._wet = da(n + 1, dtype=np.int8)  # the last: 1 for every row (the first search)
         self._most = da(1, dtype=np.int64)
+        # the step's counters: its free-surface particles and the dead so far (SURFACE, DEAD)
+        self._counts = cuda.to_device(np.zeros(2, dtype=np.int64))
         # the PPE's rows and the CG's vectors, over all particles (0 off the unknowns)
         self._diagonal, self._inverse_diagonal = da(n), da(n)
         self._b, self._x, self._r, self._z, self._q = da(n), da(n), da(n), da(n), da(n)
         self._d0 = da(n)
         self._lowest = da(n)
         self._partial = da((2, _grid(n), 3))  # the CG's block sums, two slots
-        self._solve_out = da(3)
-        self._flag = da(1, dtype=np.int32)
-        self._dead = cuda.to_device(np.zeros(1, dtype=np.int64))  # dead particles so far
-        self._cg_blocks = 0  # the cooperative grid's blocks, found at the first solve
+        self._solve_out = da(4)
+        self._blocks: dict[str, int] = {}  # each cooperative kernel's blocks, at its first launch
         self._extent = da(4)
+        self._extent_host: np.ndarray | None = None  # the state's, made by the step that left it
         self._allocate_lists(self.width)
         self._host: dict[str, np.ndarray] = {}
         # the coarse space (fluid.solver = "deflated"): none until the first solve makes it
@@ -334,33 +343,30 @@ class GPUSolver:
 
     def _search(self, position: Any, rows: Any, every: Any) -> None:
         """The neighbour lists at ``position`` for the particles of ``rows`` (all live walls
-        and fluid particles where ``every[-1]`` is 1)."""
-        k, g = self.k, _grid(self.n)
+        and fluid particles where ``every[-1]`` is 1), in one cooperative launch; searched
+        again, wider, while a row does not fit."""
         self.searches += 1
-        cells = _grid(self._cells)
-        k["fill"][cells, BLOCK](self._count, 0)
-        k["fill"][cells, BLOCK](self._cursor, 0)
-        k["cell_of"][g, BLOCK](
-            position, self._d_alive, self._d_lower, 1.0 / self.search_radius, self._d_shape,
-            self._cell, self._count,
-        )  # fmt: skip
-        tiles = _grid(self._cells)
-        k["tile_sums"][tiles, BLOCK](self._count, self._tile_sums)
-        k["tile_offsets"][1, BLOCK](self._tile_sums, self._tile_offsets)
-        k["scan_tiles"][tiles, BLOCK](self._count, self._tile_offsets, self._start)
-        k["scatter"][g, BLOCK](self._cell, self._start, self._cursor, self._member)
-        k["sort_cells"][_grid(self._cells), BLOCK](self._start, self._member)
         while True:
-            k["fill"][1, BLOCK](self._most, 0)
-            k["search"][g, BLOCK](
-                position, rows, every, self._d_kind, self._cell, self._start, self._member,
-                self._d_shape, self.search_radius, self._index, self._distance, self._list_count,
-                self._most,
+            self._launch(
+                "neighbour_search", max(self.n, self._cells), position, self._d_alive,
+                self._d_lower, 1.0 / self.search_radius, self._d_shape, rows, every,
+                self._d_kind, self.search_radius, self._cell, self._count, self._cursor,
+                self._tile_sums, self._tile_offsets, self._start, self._member, self._index,
+                self._distance, self._list_count, self._most,
             )  # fmt: skip
             most = int(self._most.copy_to_host()[0])
             if most <= self.width:
                 return
             self._allocate_lists(int(most * 1.25) + 8)
+
+    def _launch(self, name: str, rows: int, *args: Any) -> None:
+        """A cooperative launch of kernel ``name`` over ``rows`` rows: a block per ``BLOCK``
+        rows, or as many as the GPU holds at once (found at its first launch)."""
+        kernel = self.k[name]
+        blocks = self._blocks.get(name)
+        if blocks is None:
+            blocks = self._blocks[name] = cooperative_blocks(kernel, args, _grid(rows))
+        kernel[blocks, BLOCK](*args)
 
     # --------------------------------------------------------------------------------- step
 
@@ -373,12 +379,14 @@ class GPUSolver:
     def stable_dt(self, external_acceleration: float = 0.0) -> float:
         """As :meth:`MPSSolver.stable_dt`, the maxima taken on the GPU."""
         p = self.params
-        self._extent.copy_to_device(np.array([0.0, -np.inf, -np.inf, 0.0]))
-        self.k["extent"][_grid(self.n), BLOCK](
-            self._d_position, self._d_velocity, self._d_kind, self._d_alive, self._d_axis,
-            self._extent,
-        )  # fmt: skip
-        speed2, high, minus_low, fluid = self._extent.copy_to_host()
+        if self._extent_host is None:  # no step has left this state (a start, a restore)
+            self._extent.copy_to_device(np.array([0.0, -np.inf, -np.inf, 0.0]))
+            self.k["extent"][_grid(self.n), BLOCK](
+                self._d_position, self._d_velocity, self._d_kind, self._d_alive, self._d_axis,
+                self._extent,
+            )  # fmt: skip
+            self._extent_host = self._extent.copy_to_host()
+        speed2, high, minus_low, fluid = self._extent_host
         speed = height = None
         if fluid > 0:
             speed = math.sqrt(speed2)
@@ -390,11 +398,12 @@ class GPUSolver:
         ``external_force`` (N, D) N/m3 is a host array (uploaded) or a device array (read
         where it is)."""
         p = self.params
-        k, n, g = self.k, self.n, _grid(self.n)
+        n = self.n
         if external_force is not None and external_force.shape != (n, p.dim):
             # the kernel reads row i of it, unchecked
             raise ValueError(f"external_force must be ({n}, {p.dim}), not {external_force.shape}")
         self._host.clear()
+        self._extent_host = None  # the state moves
         stats = StepStats()
         timer = PhaseTimer(stats.seconds)
         ref_nd = self.reference["number_density"]
@@ -408,18 +417,7 @@ class GPUSolver:
         sync = self._cuda.synchronize
         with timer("neighbours"):
             self._search(self._d_position, self._rows_all, self._wet)
-            k["fill"][_grid(n + 1), BLOCK](self._wet, 0)
-            k["mark_wet"][g, BLOCK](
-                self._d_kind, self._d_alive, self._index, self._list_count, self._wet
-            )
-            if mixed:
-                k["number_density"][g, BLOCK](
-                    self._index, self._distance, self._list_count, re_nd,
-                    self._d_start_density, self._within,
-                )  # fmt: skip
-            sync()
         with timer("explicit"):
-            self._start_position.copy_to_device(self._d_position)
             has_external = external_force is not None
             external = self._external
             if has_external and hasattr(external_force, "copy_to_host"):
@@ -431,79 +429,54 @@ class GPUSolver:
                 else:
                     self._external.copy_to_device(force)
                 external = self._external
-            viscous = p.kinematic_viscosity * 2.0 * dim / (ref_lap.lambda_ * ref_lap.n0)
-            k["explicit_stage"][g, BLOCK](
-                self._d_position, self._d_velocity, self._d_kind, self._d_alive, self._index,
-                self._distance, self._list_count, re_lap, viscous, self._d_gravity,
-                external, has_external, p.density, dt, self._scratch_position,
-                self._scratch_velocity,
-            )  # fmt: skip
-            k["collision"][g, BLOCK](
-                self._scratch_position, self._scratch_velocity, self._d_kind, self._d_alive,
-                self._index, self._list_count, p.collision_distance * p.l0,
-                0.5 * (1.0 + p.collision_restitution), dt, self._d_position, self._d_velocity,
+            self._launch(
+                "explicit_phase", n + 1, self._d_position, self._d_velocity, self._d_kind,
+                self._d_alive, self._index, self._distance, self._list_count, re_nd, mixed,
+                self._d_start_density, self._within, re_lap,
+                p.kinematic_viscosity * 2.0 * dim / (ref_lap.lambda_ * ref_lap.n0),
+                self._d_gravity, external, has_external, p.density, dt,
+                p.collision_distance * p.l0, 0.5 * (1.0 + p.collision_restitution),
+                self._start_position, self._scratch_position, self._scratch_velocity,
+                self._wet, self.search_radius - re_nd, self._rows,
             )  # fmt: skip
             sync()
         with timer("neighbours"):
             # rows at r*: the fluid and the walls it reached at r^k (MPSSolver._wet)
-            margin = self.search_radius - re_nd
-            k["wet_rows"][g, BLOCK](
-                self._d_position, self._start_position, self._d_kind, self._d_alive, self._wet,
-                margin, self._rows,
-            )  # fmt: skip
             self._search(self._d_position, self._rows, self._wet)
-            k["number_density"][g, BLOCK](
-                self._index, self._distance, self._list_count, re_nd, self._d_density,
-                self._within,
-            )  # fmt: skip
-            sync()
         with timer("assembly"):
             threshold = p.beta * ref_nd.n0
-            k["fill"][1, BLOCK](self._most, 0)  # the free-surface count, this time
-            k["classify"][g, BLOCK](
-                self._d_alive, self._d_kind, self._d_density, self._d_start_density,
-                self._within, threshold, p.surface == "neighbour-count",
-                p.surface_neighbour_threshold * ref_nd.count,
-                p.surface == "either-density" and mixed, self._unknown, self._most,
-            )  # fmt: skip
-            k["assemble"][g, BLOCK](
-                self._d_position, self._d_velocity, self._d_kind, self._d_alive, self._index,
-                self._distance, self._list_count, self._unknown, re_lap,
+            self._launch(
+                "assembly_phase", n, self._d_position, self._d_velocity, self._d_kind,
+                self._d_alive, self._index, self._distance, self._list_count, re_nd,
+                self._d_density, self._within, self._d_start_density, threshold,
+                p.surface == "neighbour-count", p.surface_neighbour_threshold * ref_nd.count,
+                p.surface == "either-density" and mixed, self._unknown, self._counts, re_lap,
                 2.0 * dim / (ref_lap.lambda_ * ref_lap.n0), p.density * p.compressibility / dt**2,
                 re_grad, dim / ref_grad.n0, mixed,
                 p.density / dt if mixed else p.density / dt**2,
-                p.mixed_relaxation * p.density / dt**2, ref_nd.n0, self._d_density,
-                self._d_start_density, self._d_pressure, self._coefficient, self._diagonal,
-                self._inverse_diagonal, self._b, self._x,
+                p.mixed_relaxation * p.density / dt**2, ref_nd.n0, self._d_pressure,
+                self._coefficient, self._diagonal, self._inverse_diagonal, self._b, self._x,
             )  # fmt: skip
-            stats.surface = int(self._most.copy_to_host()[0])
+            sync()
         with timer("solve"):
             stats.iterations, stats.residual = self._solve()
-            k["store_pressure"][g, BLOCK](self._unknown, self._x, self._d_pressure)
-            sync()
         with timer("correction"):
             conservative = p.gradient == "conservative"
-            if conservative:
-                k["lowest_pressure"][g, BLOCK](
-                    self._d_pressure, self._d_kind, self._d_alive, self._index, self._distance,
-                    self._list_count, re_grad, self._lowest,
-                )  # fmt: skip
-            k["correct"][g, BLOCK](
-                self._d_position, self._d_velocity, self._d_pressure, self._d_kind,
-                self._d_alive, self._index, self._distance, self._list_count, re_grad, re_lap,
-                ref_grad.n0, -dt * dim / (ref_grad.n0 * p.density), dt,
-                p.gradient == "corrected", conservative, self._lowest, p.surface_repulsion,
-                self._unknown, self._scratch_position, self._scratch_velocity,
+            self._launch(
+                "correction_phase", n, self._d_position, self._d_velocity, self._d_pressure,
+                self._d_kind, self._d_alive, self._index, self._distance, self._list_count,
+                self._unknown, self._x, re_grad, re_lap, ref_grad.n0,
+                -dt * dim / (ref_grad.n0 * p.density), dt, p.gradient == "corrected",
+                conservative, self._lowest, p.surface_repulsion, self._scratch_position,
+                self._scratch_velocity, self._d_domain_min, self._d_domain_max, self._counts,
+                self._d_axis, self._extent,
             )  # fmt: skip
-            self._d_position.copy_to_device(self._scratch_position)
-            self._d_velocity.copy_to_device(self._scratch_velocity)
             self.time += dt
-            k["escape"][g, BLOCK](
-                self._d_position, self._d_velocity, self._d_pressure, self._d_kind,
-                self._d_alive, self._d_domain_min, self._d_domain_max, self._dead,
-            )  # fmt: skip
-            sync()
-            stats.dead = int(self._dead.copy_to_host()[0])  # not the whole alive array
+            # the step's one read of counters: the free surface's and the dead's counts, and
+            # the new state's extent for the next step's dt (stable_dt)
+            surface, dead = self._counts.copy_to_host()
+            stats.surface, stats.dead = int(surface), int(dead)
+            self._extent_host = self._extent.copy_to_host()
         return stats
 
     def _solve(self) -> tuple[int, float]:
@@ -518,11 +491,8 @@ class GPUSolver:
             self._inverse_diagonal, self._b, self._x, self._r, self._z, self._d0, self._q,
             self._partial, p.tolerance**2, p.max_iterations, self._solve_out, *self._coarse,
         )  # fmt: skip
-        kernel = self.k["conjugate_gradient"]
-        if self._cg_blocks == 0:
-            self._cg_blocks = cooperative_blocks(kernel, args, _grid(self.n))
-        kernel[self._cg_blocks, BLOCK](*args)
-        iterations, rr, bb = self._solve_out.copy_to_host()
+        self._launch("conjugate_gradient", self.n, *args)
+        iterations, rr, bb, not_finite = self._solve_out.copy_to_host()
         if self.two_level:
             self._coarse_age += 1
             if self._coarse_age == 1:
@@ -531,7 +501,7 @@ class GPUSolver:
                 self._coarse_age = COARSE_REFRESH  # stale: a new E^-1 for the next solve
         # a non-finite b (NaN or inf) gives a non-finite residual, as on the CPU
         residual = 0.0 if bb == 0.0 else math.sqrt(rr / bb)
-        if not (residual <= p.tolerance) or not self._finite(self._x):
+        if not (residual <= p.tolerance) or not_finite:
             raise FluidDiverged(
                 f"pressure solve stopped at relative residual {residual:.3g} after "
                 f"{int(iterations)} iterations (tolerance {p.tolerance:.3g}); reduce the time "
@@ -600,16 +570,9 @@ class GPUSolver:
         da = cuda_.device_array
         self._coarse = (
             self._cell, self._start, self._member, self._d_shape, size, d_coarse_shape,
-            d_to_coarse, d_blocks, d(np.ascontiguousarray(inverse)), da(self._cells), da(m),
-            da((COARSE_CHUNKS, m)), da(m),
+            d_to_coarse, d_blocks, d(np.ascontiguousarray(inverse)), da(m), da(m),
         )  # fmt: skip
         self.coarse_aggregates = m
-
-    def _finite(self, vector: Any) -> bool:
-        """Whether every entry of the device vector is finite (one reduction, read back)."""
-        self.k["fill"][1, BLOCK](self._flag, 0)
-        self.k["any_not_finite"][_grid(self.n), BLOCK](vector, self._flag)
-        return int(self._flag.copy_to_host()[0]) == 0
 
     # ---------------------------------------------------------------------------- checkpoints
 
@@ -644,12 +607,13 @@ class GPUSolver:
             raise ValueError(f"kind: shape {arrays['kind'].shape}, expected {self.kind.shape}")
         for name, target in targets.items():
             target.copy_to_device(values[name])
-        self._dead.copy_to_device(np.array([np.count_nonzero(~values["alive"])], dtype=np.int64))
+        self._counts.copy_to_device(np.array([0, np.count_nonzero(~values["alive"])], np.int64))
         self.kind[:] = arrays["kind"]
         self._d_kind.copy_to_device(self.kind)
         self._rows_all.copy_to_device((self.kind != DUMMY).astype(np.bool_))
         self.time = float(arrays["time"])
         self._host.clear()
+        self._extent_host = None
         self._coarse_age = COARSE_REFRESH  # the coarse space of the restored state, next solve
 
 
@@ -667,7 +631,6 @@ def no_coarse_space() -> tuple[Any, ...]:
             d(np.zeros(1, dtype=np.int64)), d(np.ones(3, dtype=np.int64)), 1,
             d(np.ones(3, dtype=np.int64)), d(np.full(1, -1, dtype=np.int32)),
             d(np.zeros(0, dtype=np.int64)), d(np.zeros((1, 1))), d(np.zeros(1)), d(np.zeros(1)),
-            d(np.zeros((COARSE_CHUNKS, 1))), d(np.zeros(1)),
         )  # fmt: skip
     return _NO_COARSE
 
@@ -686,7 +649,7 @@ def cooperative_blocks(kernel: Any, args: tuple[Any, ...], wanted: int) -> int:
     except Exception as error:  # noqa: BLE001 - measured on numba-cuda 0.30; others may differ
         # two blocks of BLOCK threads a multiprocessor fit whatever the kernel's registers
         most = 2 * int(cuda.get_current_device().MULTIPROCESSOR_COUNT)
-        log.warning("the CG's cooperative grid: %s; using %d blocks", error, most)
+        log.warning("a cooperative grid: %s; using %d blocks", error, most)
     return max(1, min(wanted, most))
 
 

@@ -17,6 +17,8 @@ from numba import cuda, float64, int32
 BLOCK = 128  # jellysim.fluid.gpu.BLOCK: threads of a block
 FLUID, WALL, DUMMY = 0, 1, 2  # jellysim.fluid.geometry's particle kinds
 CORRECTION_MIN_DETERMINANT = 0.3  # jellysim.fluid.kernels'
+# a step's counters (an int64 array): the free-surface particles of the step, the dead so far
+SURFACE, DEAD = 0, 1
 
 
 @cuda.jit(device=True)
@@ -56,11 +58,9 @@ def cell_coordinate(x, lower, inverse, size):
     return c
 
 
-@cuda.jit(cache=True)
-def cell_of(position, alive, lower, inverse, shape, cell, count):
-    i = cuda.grid(1)
-    if i >= position.shape[0]:
-        return
+@cuda.jit(device=True)
+def cell_of(i, position, alive, lower, inverse, shape, cell, count):
+    """Particle i's search cell (-1 when it is dead), counted in ``count``."""
     if not alive[i]:
         cell[i] = -1
         return
@@ -95,21 +95,9 @@ def block_scan(shared, value):
     return total
 
 
-@cuda.jit(cache=True)
-def tile_sums(count, sums):
-    """The cell counts of each tile of ``block`` cells."""
-    shared = cuda.shared.array(BLOCK, dtype=int32)
-    c = cuda.grid(1)
-    value = count[c] if c < count.shape[0] else 0
-    total = block_scan(shared, value)
-    if cuda.threadIdx.x == BLOCK - 1:
-        sums[cuda.blockIdx.x] = total
-
-
-@cuda.jit(cache=True)
-def tile_offsets(sums, offsets):
-    """``offsets[b]``: the cells before tile b (one block, a chunk of tiles at a time)."""
-    shared = cuda.shared.array(BLOCK, dtype=int32)
+@cuda.jit(device=True)
+def tile_offsets(sums, offsets, shared):
+    """``offsets[b]``: the cells before tile b (by one block, a chunk of tiles at a time)."""
     t = cuda.threadIdx.x
     carry = 0
     for first in range(0, sums.shape[0], BLOCK):
@@ -125,35 +113,16 @@ def tile_offsets(sums, offsets):
         cuda.syncthreads()
 
 
-@cuda.jit(cache=True)
-def scan_tiles(count, offsets, start):
-    """``start[0] = 0``, ``start[c + 1] = start[c] + count[c]``."""
-    shared = cuda.shared.array(BLOCK, dtype=int32)
-    c = cuda.grid(1)
-    value = count[c] if c < count.shape[0] else 0
-    inclusive = block_scan(shared, value)
-    if c < count.shape[0]:
-        start[c + 1] = offsets[cuda.blockIdx.x] + inclusive
-    if c == 0:
-        start[0] = 0
-
-
-@cuda.jit(cache=True)
-def scatter(cell, start, cursor, member):
-    i = cuda.grid(1)
-    if i >= cell.shape[0]:
-        return
+@cuda.jit(device=True)
+def scatter(i, cell, start, cursor, member):
     c = cell[i]
     if c >= 0:
         member[start[c] + cuda.atomic.add(cursor, c, 1)] = i
 
 
-@cuda.jit(cache=True)
-def sort_cells(start, member):
-    """Each cell's members in particle order (the scatter's order is the atomics')."""
-    c = cuda.grid(1)
-    if c >= start.shape[0] - 1:
-        return
+@cuda.jit(device=True)
+def sort_cell(c, start, member):
+    """Cell c's members in particle order (the scatter's order is the atomics')."""
     for a in range(start[c] + 1, start[c + 1]):
         value = member[a]
         b = a - 1
@@ -163,17 +132,14 @@ def sort_cells(start, member):
         member[b + 1] = value
 
 
-@cuda.jit(cache=True)
+@cuda.jit(device=True)
 def search(
-    position, rows, every, kind, cell, start, member, shape, radius, index, distance, count,
+    i, position, rows, every, kind, cell, start, member, shape, radius, index, distance, count,
     most,
 ):  # fmt: skip
     """Row i (``rows[i]``, or every live fluid and wall particle where ``every[-1]`` is 1):
     the live particles within ``radius`` of particle i but itself, over the 3^D cells
     around its own in order, members in particle order."""
-    i = cuda.grid(1)
-    if i >= position.shape[0]:
-        return
     found = 0
     width = index.shape[0]
     c = cell[i]
@@ -213,15 +179,69 @@ def search(
         cuda.atomic.max(most, 0, found)
 
 
+@cuda.jit(cache=True)
+def neighbour_search(
+    position, alive, lower, inverse, shape, rows, every, kind, radius, cell, count, cursor,
+    sums, offsets, start, member, index, distance, list_count, most,
+):  # fmt: skip
+    """The neighbour lists in one cooperative launch, the grid meeting between the stages:
+    each particle's cell (:func:`cell_of`); the cells' counts summed over tiles of ``BLOCK``
+    cells (a tile by a block), the tiles' offsets (by one block) and each cell's start; the
+    members scattered (:func:`scatter`) and sorted in particle order within each cell; then
+    each row's search (:func:`search`). ``most[0]``: the widest row past the lists' width,
+    0 when every row fits."""
+    grid = cuda.cg.this_grid()
+    shared = cuda.shared.array(BLOCK, dtype=int32)
+    first = cuda.grid(1)
+    stride = cuda.gridsize(1)
+    n = position.shape[0]
+    cells = count.shape[0]
+    tiles = sums.shape[0]
+    for c in range(first, cells, stride):
+        count[c] = 0
+        cursor[c] = 0
+    if first == 0:
+        most[0] = 0
+    grid.sync()
+    for i in range(first, n, stride):
+        cell_of(i, position, alive, lower, inverse, shape, cell, count)
+    grid.sync()
+    for tile in range(cuda.blockIdx.x, tiles, cuda.gridDim.x):  # the same for a block's threads
+        c = tile * BLOCK + cuda.threadIdx.x
+        total = block_scan(shared, count[c] if c < cells else 0)
+        if cuda.threadIdx.x == BLOCK - 1:
+            sums[tile] = total
+    grid.sync()
+    if cuda.blockIdx.x == 0:
+        tile_offsets(sums, offsets, shared)
+    grid.sync()
+    for tile in range(cuda.blockIdx.x, tiles, cuda.gridDim.x):
+        c = tile * BLOCK + cuda.threadIdx.x
+        inclusive = block_scan(shared, count[c] if c < cells else 0)
+        if c < cells:
+            start[c + 1] = offsets[tile] + inclusive
+    if first == 0:
+        start[0] = 0
+    grid.sync()
+    for i in range(first, n, stride):
+        scatter(i, cell, start, cursor, member)
+    grid.sync()
+    for c in range(first, cells, stride):
+        sort_cell(c, start, member)
+    grid.sync()
+    for i in range(first, n, stride):
+        search(
+            i, position, rows, every, kind, cell, start, member, shape, radius, index,
+            distance, list_count, most,
+        )  # fmt: skip
+
+
 # ------------------------------------------------------------------------ particle models
 
 
-@cuda.jit(cache=True)
-def number_density(index, distance, count, re, out, within):
+@cuda.jit(device=True)
+def number_density(i, index, distance, count, re, out, within):
     """Eq. (F2), and the neighbours within r_e (neighbour-count surface)."""
-    i = cuda.grid(1)
-    if i >= count.shape[0]:
-        return
     total = 0.0
     found = 0
     for m in range(count[i]):
@@ -233,15 +253,12 @@ def number_density(index, distance, count, re, out, within):
     within[i] = found
 
 
-@cuda.jit(cache=True)
+@cuda.jit(device=True)
 def explicit_stage(
-    position, velocity, kind, alive, index, distance, count, re, coefficient, gravity,
+    i, position, velocity, kind, alive, index, distance, count, re, coefficient, gravity,
     external, has_external, density, dt, out_position, out_velocity,
 ):  # fmt: skip
     """Eq. (F5): u* and r* of live fluid particles; other particles copied."""
-    i = cuda.grid(1)
-    if i >= position.shape[0]:
-        return
     dim = position.shape[1]
     for k in range(dim):
         out_velocity[i, k] = velocity[i, k]
@@ -267,14 +284,11 @@ def explicit_stage(
         out_position[i, k] = position[i, k] + dt * u
 
 
-@cuda.jit(cache=True)
+@cuda.jit(device=True)
 def collision(
-    position, velocity, kind, alive, index, count, reach, half, dt, out_position, out_velocity,
+    i, position, velocity, kind, alive, index, count, reach, half, dt, out_position, out_velocity,
 ):  # fmt: skip
     """Eq. (F6), the Jacobi form of :func:`jellysim.fluid.kernels.collision`."""
-    i = cuda.grid(1)
-    if i >= position.shape[0]:
-        return
     dim = position.shape[1]
     for k in range(dim):
         out_velocity[i, k] = velocity[i, k]
@@ -304,16 +318,13 @@ def collision(
             out_position[i, k] += dt * du
 
 
-@cuda.jit(cache=True)
+@cuda.jit(device=True)
 def classify(
-    alive, kind, density_star, density_start, within, threshold, by_count, count_threshold,
-    either, unknown, surface_count,
+    i, alive, kind, density_star, density_start, within, threshold, by_count, count_threshold,
+    either, unknown, counts,
 ):  # fmt: skip
     """The unknowns of the PPE: live fluid and wall particles not on the free surface, Eq.
     (F7) or (F7b) (``unknown`` 1, else 0)."""
-    i = cuda.grid(1)
-    if i >= alive.shape[0]:
-        return
     solid = alive[i] and kind[i] != DUMMY
     surface = density_star[i] < threshold
     if by_count and within[i] < count_threshold:
@@ -322,25 +333,21 @@ def classify(
         surface = True
     unknown[i] = 1 if (solid and not surface) else 0
     if solid and surface:
-        cuda.atomic.add(surface_count, 0, 1)
+        cuda.atomic.add(counts, SURFACE, 1)
 
 
-@cuda.jit(cache=True)
+@cuda.jit(device=True)
 def assemble(
-    position, velocity, kind, alive, index, distance, count, unknown, re_lap, a_coefficient,
+    i, position, velocity, kind, alive, index, distance, count, unknown, re_lap, a_coefficient,
     shift, re_grad, div_coefficient, mixed, source_scale, mixed_scale, n0, density_star,
     density_start, pressure, coefficient, diagonal, inverse_diagonal, b, x,
 ):  # fmt: skip
     """Eq. (F8)-(F9): the PPE row of particle i (``coefficient[m, i]`` = a_ij for unknown
     neighbours, 0 else; ``diagonal``), its source ``b`` and the warm start ``x``; zeros for
-    the particles that are no unknowns."""
-    i = cuda.grid(1)
-    if i >= unknown.shape[0]:
-        return
-    width = coefficient.shape[0]
+    the particles that are no unknowns (diagonal, inverse_diagonal, b, x). ``coefficient``'s
+    slots past a row's count, and its rows for the particles that are no unknowns (diagonal
+    0), are left as they are: the CG and the coarse matrix read neither."""
     if unknown[i] == 0:
-        for m in range(width):
-            coefficient[m, i] = 0.0
         diagonal[i] = 0.0
         inverse_diagonal[i] = 0.0
         b[i] = 0.0
@@ -365,8 +372,6 @@ def assemble(
             for k in range(dim):
                 dot += (velocity[j, k] - velocity[i, k]) * (position[j, k] - position[i, k])
             divergence += dot / (r * r) * weight(r, re_grad)
-    for m in range(count[i], width):
-        coefficient[m, i] = 0.0
     diagonal[i] = total + shift
     inverse_diagonal[i] = 1.0 / (total + shift)
     if mixed:
@@ -388,21 +393,6 @@ def coarse_block(c, shape, k, coarse_shape):
     cy = rest % shape[1]
     cz = rest // shape[1]
     return cx // k + coarse_shape[0] * (cy // k + coarse_shape[1] * (cz // k))
-
-
-@cuda.jit(device=True)
-def aggregate_sum(aggregate, cell_sums, shape, k, coarse_shape):
-    """The sum of ``cell_sums`` over an aggregate's search cells, in cell order."""
-    bx = aggregate % coarse_shape[0]
-    rest = aggregate // coarse_shape[0]
-    by = rest % coarse_shape[1]
-    bz = rest // coarse_shape[1]
-    total = 0.0
-    for fz in range(bz * k, min(bz * k + k, shape[2])):
-        for fy in range(by * k, min(by * k + k, shape[1])):
-            for fx in range(bx * k, min(bx * k + k, shape[0])):
-                total += cell_sums[fx + shape[0] * (fy + shape[1] * fz)]
-    return total
 
 
 @cuda.jit(cache=True)
@@ -452,43 +442,44 @@ def coarse_matrix(
 @cuda.jit(device=True)
 def two_level(
     r, z, diagonal, inverse_diagonal, cell, start, member, shape, k, coarse_shape,
-    to_coarse, blocks, inverse, cell_sums, coarse_r, partial, coarse_z,
+    to_coarse, blocks, inverse, coarse_r, coarse_z, shared,
 ):  # fmt: skip
     """``z = D^-1 r + Z E^-1 Z^T r`` over the grid (``r`` complete on entry; each thread
-    writes z on its own rows): r summed over each search cell's members (in particle order,
-    the search's sorted lists) and then over each aggregate's cells, the dense product with
-    E^-1 in ``partial.shape[0]`` chunks of columns (their sums in chunk order), and each
-    unknown row's aggregate's value added to its Jacobi term. Fixed orders throughout."""
+    writes z on its own rows), in two grid barriers. An aggregate a block: r summed over its
+    members (each row of its k x k (x k) search cells along x one run of the search's sorted
+    members; each thread a strided share, then the block's tree); then E^-1's row a block,
+    the same way; then each unknown row's aggregate's value added to its Jacobi term.
+    Fixed orders throughout (``shared``: the block's BLOCK float64 scratch)."""
     grid = cuda.cg.this_grid()
-    first = cuda.grid(1)
-    stride = cuda.gridsize(1)
-    for c in range(first, start.shape[0] - 1, stride):
-        total = 0.0
-        for s in range(start[c], start[c + 1]):
-            total += r[member[s]]
-        cell_sums[c] = total
-    grid.sync()
+    t = cuda.threadIdx.x
     m = blocks.shape[0]
-    for a in range(first, m, stride):
-        coarse_r[a] = aggregate_sum(blocks[a], cell_sums, shape, k, coarse_shape)
-    grid.sync()
-    chunks = partial.shape[0]
-    length = (m + chunks - 1) // chunks
-    for w in range(first, m * chunks, stride):
-        a = w % m  # consecutive threads: consecutive a, one row of the symmetric E^-1
-        chunk = w // m
+    for a in range(cuda.blockIdx.x, m, cuda.gridDim.x):  # the same for a block's threads
+        aggregate = blocks[a]
+        bx = aggregate % coarse_shape[0]
+        rest = aggregate // coarse_shape[0]
+        by = rest % coarse_shape[1]
+        bz = rest // coarse_shape[1]
+        x0 = bx * k
+        x1 = min(x0 + k, shape[0])
         total = 0.0
-        for col in range(chunk * length, min(chunk * length + length, m)):
-            total += inverse[col, a] * coarse_r[col]
-        partial[chunk, a] = total
+        for fz in range(bz * k, min(bz * k + k, shape[2])):
+            for fy in range(by * k, min(by * k + k, shape[1])):
+                row = shape[0] * (fy + shape[1] * fz)
+                for s in range(start[row + x0] + t, start[row + x1], BLOCK):
+                    total += r[member[s]]
+        total = block_sum(shared, total)
+        if t == 0:
+            coarse_r[a] = total
     grid.sync()
-    for a in range(first, m, stride):
+    for a in range(cuda.blockIdx.x, m, cuda.gridDim.x):
         total = 0.0
-        for chunk in range(chunks):
-            total += partial[chunk, a]
-        coarse_z[a] = total
+        for col in range(t, m, BLOCK):
+            total += inverse[a, col] * coarse_r[col]  # E^-1 symmetric: its row a
+        total = block_sum(shared, total)
+        if t == 0:
+            coarse_z[a] = total
     grid.sync()
-    for i in range(first, r.shape[0], stride):
+    for i in range(cuda.grid(1), r.shape[0], cuda.gridsize(1)):
         zi = inverse_diagonal[i] * r[i]
         if diagonal[i] != 0.0 and cell[i] >= 0:
             col = to_coarse[coarse_block(cell[i], shape, k, coarse_shape)]
@@ -537,16 +528,17 @@ def gathered(partial, slot, column, shared):
 def conjugate_gradient(
     index, count, coefficient, diagonal, inverse_diagonal, b, x, r, z, d, q, partial,
     tolerance2, max_iterations, out, cell, start, member, shape, k, coarse_shape,
-    to_coarse, blocks, inverse, cell_sums, coarse_r, coarse_partial, coarse_z,
+    to_coarse, blocks, inverse, coarse_r, coarse_z,
 ):  # fmt: skip
     """Preconditioned CG for ``A x = b`` from the guess in ``x``, all iterations in one
     cooperative launch: each thread takes every gridsize-th row, and the grid meets at
     three barriers an iteration (the dot products' block sums are posted to one of two
     slots by turns, so that a slot is rewritten only after every block has read it).
     The preconditioner is Jacobi, or with aggregates (``blocks`` not empty) Jacobi plus
-    the coarse correction of :func:`two_level`, five barriers more. Stops when ``r.r <=
-    tolerance2 b.b`` or after ``max_iterations``; ``out`` = (iterations, r.r, b.b). Every
-    thread computes the same scalars, so all take the same branches."""
+    the coarse correction of :func:`two_level`, three barriers more. Stops when ``r.r <=
+    tolerance2 b.b`` or after ``max_iterations``; ``out`` = (iterations, r.r, b.b, 1 if some
+    entry of x is not finite else 0). Every thread computes the same scalars, so all take
+    the same branches."""
     grid = cuda.cg.this_grid()
     shared = cuda.shared.array(BLOCK, dtype=float64)
     first = cuda.grid(1)
@@ -556,6 +548,8 @@ def conjugate_gradient(
     c = 0.0
     e = 0.0
     coarse = blocks.shape[0] > 0
+    if first == 0:
+        out[3] = 0.0  # before the first barrier; set to 1 only after it
     for i in range(first, n, stride):
         ri = 0.0
         if diagonal[i] != 0.0:
@@ -572,7 +566,7 @@ def conjugate_gradient(
         grid.sync()
         two_level(
             r, z, diagonal, inverse_diagonal, cell, start, member, shape, k, coarse_shape,
-            to_coarse, blocks, inverse, cell_sums, coarse_r, coarse_partial, coarse_z,
+            to_coarse, blocks, inverse, coarse_r, coarse_z, shared,
         )  # fmt: skip
         for i in range(first, n, stride):
             d[i] = z[i]
@@ -619,8 +613,7 @@ def conjugate_gradient(
             grid.sync()
             two_level(
                 r, z, diagonal, inverse_diagonal, cell, start, member, shape, k,
-                coarse_shape, to_coarse, blocks, inverse, cell_sums, coarse_r, coarse_partial,
-                coarse_z,
+                coarse_shape, to_coarse, blocks, inverse, coarse_r, coarse_z, shared,
             )  # fmt: skip
             for i in range(first, n, stride):
                 a += r[i] * z[i]
@@ -637,17 +630,19 @@ def conjugate_gradient(
         for i in range(first, n, stride):
             d[i] = z[i] + beta * d[i]
         grid.sync()
+    for i in range(first, n, stride):  # each thread's own rows of x, as it left them
+        if not math.isfinite(x[i]):
+            out[3] = 1.0
     if first == 0:
         out[0] = iterations
         out[1] = rr
         out[2] = bb
 
 
-@cuda.jit(cache=True)
-def mark_wet(kind, alive, index, count, wet):
+@cuda.jit(device=True)
+def mark_wet(i, kind, alive, index, count, wet):
     """``wet`` 1 for live fluid particles and the walls in their lists (at r^k)."""
-    i = cuda.grid(1)
-    if i >= kind.shape[0] or not (alive[i] and kind[i] == FLUID):
+    if not (alive[i] and kind[i] == FLUID):
         return
     wet[i] = 1
     for m in range(count[i]):
@@ -656,15 +651,12 @@ def mark_wet(kind, alive, index, count, wet):
             wet[j] = 1
 
 
-@cuda.jit(cache=True)
-def wet_rows(position, start, kind, alive, wet, margin, rows):
+@cuda.jit(device=True)
+def wet_rows(i, position, start, kind, alive, wet, margin, rows):
     """The rows of the list at r*, as :meth:`MPSSolver._wet`: the wet particles, or all
     live fluid and wall particles when some particle has moved more than ``margin``
     (``wet[n]``, set here by any thread that finds one, and read by the search)."""
-    i = cuda.grid(1)
     n = kind.shape[0]
-    if i >= n:
-        return
     rows[i] = alive[i] and kind[i] != DUMMY and wet[i] == 1
     if alive[i]:
         r2 = 0.0
@@ -676,24 +668,15 @@ def wet_rows(position, start, kind, alive, wet, margin, rows):
 
 
 @cuda.jit(cache=True)
-def any_not_finite(vector, flag):
-    i = cuda.grid(1)
-    if i < vector.shape[0] and not math.isfinite(vector[i]):
-        cuda.atomic.max(flag, 0, 1)
-
-
-@cuda.jit(cache=True)
 def fill(array, value):
     i = cuda.grid(1)
     if i < array.shape[0]:
         array[i] = value
 
 
-@cuda.jit(cache=True)
-def store_pressure(unknown, x, pressure):
-    i = cuda.grid(1)
-    if i < x.shape[0]:
-        pressure[i] = max(x[i], 0.0) if unknown[i] == 1 else 0.0
+@cuda.jit(device=True)
+def store_pressure(i, unknown, x, pressure):
+    pressure[i] = max(x[i], 0.0) if unknown[i] == 1 else 0.0
 
 
 @cuda.jit(cache=True)
@@ -744,13 +727,10 @@ def solve_small(m, v, dim):
     v[2] = (c02 * v0 + c12 * v1 + c22 * v2) / det
 
 
-@cuda.jit(cache=True)
-def lowest_pressure(pressure, kind, alive, index, distance, count, re, lowest):
+@cuda.jit(device=True)
+def lowest_pressure(i, pressure, kind, alive, index, distance, count, re, lowest):
     """p_min,i of Eq. (F10c): the least pressure of i and its live fluid and wall neighbours
     within r_e (its own where it has no row)."""
-    i = cuda.grid(1)
-    if i >= pressure.shape[0]:
-        return
     least = pressure[i]
     if alive[i]:
         for m in range(count[i]):
@@ -760,16 +740,13 @@ def lowest_pressure(pressure, kind, alive, index, distance, count, re, lowest):
     lowest[i] = least
 
 
-@cuda.jit(cache=True)
+@cuda.jit(device=True)
 def correct(
-    position, velocity, pressure, kind, alive, index, distance, count, re, re_lap,
+    i, position, velocity, pressure, kind, alive, index, distance, count, re, re_lap,
     n0_gradient, coefficient, dt, corrected, conservative, lowest, repulse, unknown,
     out_position, out_velocity,
 ):  # fmt: skip
     """Eq. (F10), (F10a), (F10b) or (F10c) and the correction Eq. (F13)."""
-    i = cuda.grid(1)
-    if i >= position.shape[0]:
-        return
     dim = position.shape[1]
     for k in range(dim):
         out_velocity[i, k] = velocity[i, k]
@@ -858,12 +835,11 @@ def correct(
         out_position[i, k] += dt * du
 
 
-@cuda.jit(cache=True)
-def escape(position, velocity, pressure, kind, alive, lower, upper, dead):
-    """Live fluid particles outside the domain or no longer finite die; ``dead[0]`` counts
-    them (an integer sum: the same whatever the order)."""
-    i = cuda.grid(1)
-    if i >= position.shape[0] or not (alive[i] and kind[i] == FLUID):
+@cuda.jit(device=True)
+def escape(i, position, velocity, pressure, kind, alive, lower, upper, counts):
+    """Live fluid particles outside the domain or no longer finite die; ``counts[DEAD]``
+    counts them (an integer sum: the same whatever the order)."""
+    if not (alive[i] and kind[i] == FLUID):
         return
     dying = False
     for k in range(position.shape[1]):
@@ -873,18 +849,16 @@ def escape(position, velocity, pressure, kind, alive, lower, upper, dead):
             dying = True
     if dying:
         alive[i] = False
-        cuda.atomic.add(dead, 0, 1)
+        cuda.atomic.add(counts, DEAD, 1)
         pressure[i] = 0.0
         for k in range(position.shape[1]):
             velocity[i, k] = 0.0
 
 
-@cuda.jit(cache=True)
-def extent(position, velocity, kind, alive, axis, out):
-    """out = (largest speed^2, largest and minus the least coordinate along ``axis``, live
-    fluid count) over live fluid particles (maxima: the same whatever the order)."""
-    i = cuda.grid(1)
-    if i >= position.shape[0] or not (alive[i] and kind[i] == FLUID):
+@cuda.jit(device=True)
+def extent_of(i, position, velocity, kind, alive, axis, out):
+    """Particle i's share of :func:`extent`."""
+    if not (alive[i] and kind[i] == FLUID):
         return
     speed2 = 0.0
     along = 0.0
@@ -897,6 +871,135 @@ def extent(position, velocity, kind, alive, axis, out):
     cuda.atomic.add(out, 3, 1.0)
 
 
+@cuda.jit(cache=True)
+def extent(position, velocity, kind, alive, axis, out):
+    """out = (largest speed^2, largest and minus the least coordinate along ``axis``, live
+    fluid count) over live fluid particles (maxima: the same whatever the order), from
+    ``out`` = (0, -inf, -inf, 0)."""
+    i = cuda.grid(1)
+    if i < position.shape[0]:
+        extent_of(i, position, velocity, kind, alive, axis, out)
+
+
+# ---------------------------------------------------------------- a step's phases, fused
+# Each phase of a step is one cooperative launch (its blocks all resident, the grid meeting
+# at barriers between its stages), not a launch a stage: a launch costs tens of microseconds
+# on the host, more than a stage's work on the GPU at 57,000 particles (docs/performance.md).
+# Each stage is a device function above on every gridsize-th particle (the search's tile
+# stages: every gridDim-th tile, a tile by a block).
+
+
+@cuda.jit(cache=True)
+def explicit_phase(
+    position, velocity, kind, alive, index, distance, list_count, re_nd, mixed,
+    start_density, within, re_lap, viscous, gravity, external, has_external, density, dt,
+    reach, half, start_position, scratch_position, scratch_velocity, wet, margin, rows,
+):  # fmt: skip
+    """The step from the lists at r^k to the rows of the lists at r*: the wet particles
+    (:func:`mark_wet`, from ``wet`` all 0), the number density at r^k where the source is
+    mixed, r^k kept in ``start_position``, Eq. (F5) into the scratch arrays, the collisions
+    back into the state, and the rows at r* (:func:`wet_rows`)."""
+    grid = cuda.cg.this_grid()
+    first = cuda.grid(1)
+    stride = cuda.gridsize(1)
+    n = position.shape[0]
+    for i in range(first, n + 1, stride):
+        wet[i] = 0
+    grid.sync()
+    for i in range(first, n, stride):
+        mark_wet(i, kind, alive, index, list_count, wet)
+        if mixed:
+            number_density(i, index, distance, list_count, re_nd, start_density, within)
+        for k in range(position.shape[1]):
+            start_position[i, k] = position[i, k]
+        explicit_stage(
+            i, position, velocity, kind, alive, index, distance, list_count, re_lap, viscous,
+            gravity, external, has_external, density, dt, scratch_position, scratch_velocity,
+        )  # fmt: skip
+    grid.sync()
+    for i in range(first, n, stride):
+        collision(
+            i, scratch_position, scratch_velocity, kind, alive, index, list_count, reach, half,
+            dt, position, velocity,
+        )  # fmt: skip
+        wet_rows(i, position, start_position, kind, alive, wet, margin, rows)  # its own row
+
+
+@cuda.jit(cache=True)
+def assembly_phase(
+    position, velocity, kind, alive, index, distance, list_count, re_nd, density, within,
+    start_density, threshold, by_count, count_threshold, either, unknown, counts, re_lap,
+    a_coefficient, shift, re_grad, div_coefficient, mixed, source_scale, mixed_scale, n0,
+    pressure, coefficient, diagonal, inverse_diagonal, b, x,
+):  # fmt: skip
+    """The Poisson system at r*: the number density (Eq. F2), the unknowns (:func:`classify`,
+    the free-surface particles counted in ``counts[SURFACE]`` from 0) and each row
+    (:func:`assemble`)."""
+    grid = cuda.cg.this_grid()
+    first = cuda.grid(1)
+    stride = cuda.gridsize(1)
+    n = position.shape[0]
+    if first == 0:
+        counts[SURFACE] = 0
+    for i in range(first, n, stride):
+        number_density(i, index, distance, list_count, re_nd, density, within)
+    grid.sync()
+    for i in range(first, n, stride):
+        classify(
+            i, alive, kind, density, start_density, within, threshold, by_count,
+            count_threshold, either, unknown, counts,
+        )  # fmt: skip
+    grid.sync()
+    for i in range(first, n, stride):
+        assemble(
+            i, position, velocity, kind, alive, index, distance, list_count, unknown, re_lap,
+            a_coefficient, shift, re_grad, div_coefficient, mixed, source_scale, mixed_scale,
+            n0, density, start_density, pressure, coefficient, diagonal, inverse_diagonal, b,
+            x,
+        )  # fmt: skip
+
+
+@cuda.jit(cache=True)
+def correction_phase(
+    position, velocity, pressure, kind, alive, index, distance, list_count, unknown, x,
+    re_grad, re_lap, n0_gradient, coefficient, dt, corrected, conservative, lowest, repulse,
+    scratch_position, scratch_velocity, lower, upper, counts, axis, out_extent,
+):  # fmt: skip
+    """From the solve's ``x`` to the next state: the pressures (:func:`store_pressure`),
+    p_min (Eq. F10c, when ``conservative``), the correction (Eq. F13) into the scratch arrays
+    and from there into the state, the escaped particles dead (counted in ``counts[DEAD]``),
+    and the new state's :func:`extent` into ``out_extent``, for the next step's dt."""
+    grid = cuda.cg.this_grid()
+    first = cuda.grid(1)
+    stride = cuda.gridsize(1)
+    n = position.shape[0]
+    if first == 0:
+        out_extent[0] = 0.0
+        out_extent[1] = -math.inf
+        out_extent[2] = -math.inf
+        out_extent[3] = 0.0
+    for i in range(first, n, stride):
+        store_pressure(i, unknown, x, pressure)
+    grid.sync()
+    if conservative:
+        for i in range(first, n, stride):
+            lowest_pressure(i, pressure, kind, alive, index, distance, list_count, re_grad, lowest)
+        grid.sync()
+    for i in range(first, n, stride):
+        correct(
+            i, position, velocity, pressure, kind, alive, index, distance, list_count, re_grad,
+            re_lap, n0_gradient, coefficient, dt, corrected, conservative, lowest, repulse,
+            unknown, scratch_position, scratch_velocity,
+        )  # fmt: skip
+    grid.sync()
+    for i in range(first, n, stride):
+        for k in range(position.shape[1]):
+            position[i, k] = scratch_position[i, k]
+            velocity[i, k] = scratch_velocity[i, k]
+        escape(i, position, velocity, pressure, kind, alive, lower, upper, counts)
+        extent_of(i, position, velocity, kind, alive, axis, out_extent)
+
+
 # every kernel and device function by name, as GPUSolver looks them up
 KERNELS = {
     "weight": weight,
@@ -904,19 +1007,17 @@ KERNELS = {
     "cell_coordinate": cell_coordinate,
     "cell_of": cell_of,
     "block_scan": block_scan,
-    "tile_sums": tile_sums,
     "tile_offsets": tile_offsets,
-    "scan_tiles": scan_tiles,
     "scatter": scatter,
-    "sort_cells": sort_cells,
+    "sort_cell": sort_cell,
     "search": search,
+    "neighbour_search": neighbour_search,
     "number_density": number_density,
     "explicit_stage": explicit_stage,
     "collision": collision,
     "classify": classify,
     "assemble": assemble,
     "coarse_block": coarse_block,
-    "aggregate_sum": aggregate_sum,
     "coarse_flags": coarse_flags,
     "coarse_matrix": coarse_matrix,
     "two_level": two_level,
@@ -926,7 +1027,6 @@ KERNELS = {
     "conjugate_gradient": conjugate_gradient,
     "mark_wet": mark_wet,
     "wet_rows": wet_rows,
-    "any_not_finite": any_not_finite,
     "fill": fill,
     "store_pressure": store_pressure,
     "weighted_sums": weighted_sums,
@@ -935,4 +1035,8 @@ KERNELS = {
     "correct": correct,
     "escape": escape,
     "extent": extent,
+    "extent_of": extent_of,
+    "explicit_phase": explicit_phase,
+    "assembly_phase": assembly_phase,
+    "correction_phase": correction_phase,
 }
