@@ -99,6 +99,8 @@ def test_the_kernels_constants_are_their_sources() -> None:
     from jellysim.fluid import geometry, gpu_kernels, kernels
 
     assert gpu_kernels.BLOCK == gpu.BLOCK
+    team = gpu.COARSE_TEAM_SIMULATED  # a power of two dividing a block: its teams' trees
+    assert gpu.BLOCK % team == 0 and team & (team - 1) == 0 and team > 1
     kinds = (gpu_kernels.FLUID, gpu_kernels.WALL, gpu_kernels.DUMMY)
     assert kinds == (geometry.FLUID, geometry.WALL, geometry.DUMMY)
     assert gpu_kernels.CORRECTION_MIN_DETERMINANT == kernels.CORRECTION_MIN_DETERMINANT

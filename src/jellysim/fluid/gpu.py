@@ -108,6 +108,8 @@ COARSE_LARGEST = 2500
 COARSE_PARTICLES = 200
 COARSE_REFRESH = 200
 COARSE_STALE = 1.25
+# The coarse correction's team (:func:`coarse_team`) in Numba's CUDA simulator.
+COARSE_TEAM_SIMULATED = 4
 
 _KERNELS: dict[str, Any] | None = None
 
@@ -571,6 +573,7 @@ class GPUSolver:
         self._coarse = (
             self._cell, self._start, self._member, self._d_shape, size, d_coarse_shape,
             d_to_coarse, d_blocks, d(np.ascontiguousarray(inverse)), da(m), da(m),
+            coarse_team(),
         )  # fmt: skip
         self.coarse_aggregates = m
 
@@ -631,8 +634,18 @@ def no_coarse_space() -> tuple[Any, ...]:
             d(np.zeros(1, dtype=np.int64)), d(np.ones(3, dtype=np.int64)), 1,
             d(np.ones(3, dtype=np.int64)), d(np.full(1, -1, dtype=np.int32)),
             d(np.zeros(0, dtype=np.int64)), d(np.zeros((1, 1))), d(np.zeros(1)), d(np.zeros(1)),
+            coarse_team(),
         )  # fmt: skip
     return _NO_COARSE
+
+
+def coarse_team() -> int:
+    """The threads that share an aggregate's sums in the coarse correction: a block on a GPU
+    (the shortest chains of loads, a tree of 7 levels); COARSE_TEAM_SIMULATED in the simulator,
+    where each level of the tree is a barrier of 128 Python threads (a team serves BLOCK / team
+    aggregates at once). Another team sums in another order: other round-off, as on another
+    card."""
+    return COARSE_TEAM_SIMULATED if simulated() else BLOCK
 
 
 def cooperative_blocks(kernel: Any, args: tuple[Any, ...], wanted: int) -> int:

@@ -440,43 +440,70 @@ def coarse_matrix(
 
 
 @cuda.jit(device=True)
+def team_sum(shared, value, team):
+    """The sum of ``value`` over each team of ``team`` consecutive threads of the block (a
+    power of two dividing BLOCK), in a fixed tree order (every thread of a team gets its
+    team's sum)."""
+    t = cuda.threadIdx.x
+    lane = t % team
+    shared[t] = value
+    cuda.syncthreads()
+    step = team // 2
+    while step > 0:
+        if lane < step:
+            shared[t] += shared[t + step]
+        cuda.syncthreads()
+        step //= 2
+    total = shared[t - lane]
+    cuda.syncthreads()
+    return total
+
+
+@cuda.jit(device=True)
 def two_level(
     r, z, diagonal, inverse_diagonal, cell, start, member, shape, k, coarse_shape,
-    to_coarse, blocks, inverse, coarse_r, coarse_z, shared,
+    to_coarse, blocks, inverse, coarse_r, coarse_z, team, shared,
 ):  # fmt: skip
     """``z = D^-1 r + Z E^-1 Z^T r`` over the grid (``r`` complete on entry; each thread
-    writes z on its own rows), in two grid barriers. An aggregate a block: r summed over its
-    members (each row of its k x k (x k) search cells along x one run of the search's sorted
-    members; each thread a strided share, then the block's tree); then E^-1's row a block,
-    the same way; then each unknown row's aggregate's value added to its Jacobi term.
-    Fixed orders throughout (``shared``: the block's BLOCK float64 scratch)."""
+    writes z on its own rows), in two grid barriers. An aggregate a team of ``team`` threads
+    (BLOCK / team aggregates a block at a time): r summed over its members (each row of its
+    k x k (x k) search cells along x one run of the search's sorted members; each lane a
+    strided share, then the team's tree); then E^-1's row a team, the same way; then each
+    unknown row's aggregate's value added to its Jacobi term. Fixed orders throughout,
+    whatever the grid (``shared``: the block's BLOCK float64 scratch)."""
     grid = cuda.cg.this_grid()
-    t = cuda.threadIdx.x
+    lane = cuda.threadIdx.x % team
+    teams = BLOCK // team
     m = blocks.shape[0]
-    for a in range(cuda.blockIdx.x, m, cuda.gridDim.x):  # the same for a block's threads
-        aggregate = blocks[a]
-        bx = aggregate % coarse_shape[0]
-        rest = aggregate // coarse_shape[0]
-        by = rest % coarse_shape[1]
-        bz = rest // coarse_shape[1]
-        x0 = bx * k
-        x1 = min(x0 + k, shape[0])
+    # the same trip count for a block's threads: team_sum meets the block
+    for first_team in range(cuda.blockIdx.x * teams, m, cuda.gridDim.x * teams):
+        a = first_team + cuda.threadIdx.x // team
         total = 0.0
-        for fz in range(bz * k, min(bz * k + k, shape[2])):
-            for fy in range(by * k, min(by * k + k, shape[1])):
-                row = shape[0] * (fy + shape[1] * fz)
-                for s in range(start[row + x0] + t, start[row + x1], BLOCK):
-                    total += r[member[s]]
-        total = block_sum(shared, total)
-        if t == 0:
+        if a < m:
+            aggregate = blocks[a]
+            bx = aggregate % coarse_shape[0]
+            rest = aggregate // coarse_shape[0]
+            by = rest % coarse_shape[1]
+            bz = rest // coarse_shape[1]
+            x0 = bx * k
+            x1 = min(x0 + k, shape[0])
+            for fz in range(bz * k, min(bz * k + k, shape[2])):
+                for fy in range(by * k, min(by * k + k, shape[1])):
+                    row = shape[0] * (fy + shape[1] * fz)
+                    for s in range(start[row + x0] + lane, start[row + x1], team):
+                        total += r[member[s]]
+        total = team_sum(shared, total, team)
+        if lane == 0 and a < m:
             coarse_r[a] = total
     grid.sync()
-    for a in range(cuda.blockIdx.x, m, cuda.gridDim.x):
+    for first_team in range(cuda.blockIdx.x * teams, m, cuda.gridDim.x * teams):
+        a = first_team + cuda.threadIdx.x // team
         total = 0.0
-        for col in range(t, m, BLOCK):
-            total += inverse[a, col] * coarse_r[col]  # E^-1 symmetric: its row a
-        total = block_sum(shared, total)
-        if t == 0:
+        if a < m:
+            for col in range(lane, m, team):
+                total += inverse[a, col] * coarse_r[col]  # E^-1 symmetric: its row a
+        total = team_sum(shared, total, team)
+        if lane == 0 and a < m:
             coarse_z[a] = total
     grid.sync()
     for i in range(cuda.grid(1), r.shape[0], cuda.gridsize(1)):
@@ -528,7 +555,7 @@ def gathered(partial, slot, column, shared):
 def conjugate_gradient(
     index, count, coefficient, diagonal, inverse_diagonal, b, x, r, z, d, q, partial,
     tolerance2, max_iterations, out, cell, start, member, shape, k, coarse_shape,
-    to_coarse, blocks, inverse, coarse_r, coarse_z,
+    to_coarse, blocks, inverse, coarse_r, coarse_z, team,
 ):  # fmt: skip
     """Preconditioned CG for ``A x = b`` from the guess in ``x``, all iterations in one
     cooperative launch: each thread takes every gridsize-th row, and the grid meets at
@@ -566,7 +593,7 @@ def conjugate_gradient(
         grid.sync()
         two_level(
             r, z, diagonal, inverse_diagonal, cell, start, member, shape, k, coarse_shape,
-            to_coarse, blocks, inverse, coarse_r, coarse_z, shared,
+            to_coarse, blocks, inverse, coarse_r, coarse_z, team, shared,
         )  # fmt: skip
         for i in range(first, n, stride):
             d[i] = z[i]
@@ -613,7 +640,7 @@ def conjugate_gradient(
             grid.sync()
             two_level(
                 r, z, diagonal, inverse_diagonal, cell, start, member, shape, k,
-                coarse_shape, to_coarse, blocks, inverse, coarse_r, coarse_z, shared,
+                coarse_shape, to_coarse, blocks, inverse, coarse_r, coarse_z, team, shared,
             )  # fmt: skip
             for i in range(first, n, stride):
                 a += r[i] * z[i]
@@ -1020,6 +1047,7 @@ KERNELS = {
     "coarse_block": coarse_block,
     "coarse_flags": coarse_flags,
     "coarse_matrix": coarse_matrix,
+    "team_sum": team_sum,
     "two_level": two_level,
     "product": product,
     "post": post,
