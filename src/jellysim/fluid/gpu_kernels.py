@@ -29,20 +29,29 @@ def weight(r, re):
 
 
 @cuda.jit(device=True)
-def block_sum(shared, value):
-    """The sum of ``value`` over the block, in a fixed tree order (every thread gets it)."""
+def team_sum(shared, value, team):
+    """The sum of ``value`` over each team of ``team`` consecutive threads of the block (a
+    power of two dividing BLOCK), in a fixed tree order (every thread of a team gets its
+    team's sum)."""
     t = cuda.threadIdx.x
+    lane = t % team
     shared[t] = value
     cuda.syncthreads()
-    step = BLOCK // 2
+    step = team // 2
     while step > 0:
-        if t < step:
+        if lane < step:
             shared[t] += shared[t + step]
         cuda.syncthreads()
         step //= 2
-    total = shared[0]
+    total = shared[t - lane]
     cuda.syncthreads()
     return total
+
+
+@cuda.jit(device=True)
+def block_sum(shared, value):
+    """The sum of ``value`` over the block, in a fixed tree order (every thread gets it)."""
+    return team_sum(shared, value, BLOCK)
 
 
 # ------------------------------------------------------------------------ neighbour search
@@ -437,26 +446,6 @@ def coarse_matrix(
                             col = to_coarse[coarse_block(cell[j], shape, k, coarse_shape)]
                             if col >= 0:
                                 e[a, col] -= value
-
-
-@cuda.jit(device=True)
-def team_sum(shared, value, team):
-    """The sum of ``value`` over each team of ``team`` consecutive threads of the block (a
-    power of two dividing BLOCK), in a fixed tree order (every thread of a team gets its
-    team's sum)."""
-    t = cuda.threadIdx.x
-    lane = t % team
-    shared[t] = value
-    cuda.syncthreads()
-    step = team // 2
-    while step > 0:
-        if lane < step:
-            shared[t] += shared[t + step]
-        cuda.syncthreads()
-        step //= 2
-    total = shared[t - lane]
-    cuda.syncthreads()
-    return total
 
 
 @cuda.jit(device=True)
