@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_fluid.py [--steps 20] [--threads N] [--chunksize N]
         [--solver NAME]
-        [--case NAME ...] [--set KEY=VALUE ...] [--compare-solvers]
+        [--case NAME ...] [--set KEY=VALUE ...] [--compare-solvers] [--compare-precision R]
 
 The dam break of dam-break-2d at a / l0 = 158 with the preset's own scheme (hexagonal lattice,
 mixed source, corrected gradient: 57,670 fluid particles), the same dam break with the paper's
@@ -19,6 +19,10 @@ next step's; ``compare_solvers``) is solved from a cold
 start (zero pressure) by plain CG, ICCG and deflated CG to the scene's tolerance, and each
 one's iterations and wall time are printed (issue 5: a preconditioned CG at least 3x fewer
 iterations than plain CG).
+
+``--compare-precision R``: the same PPE assembled with the matrix in double and in single
+precision (``fluid.matrix_precision``), each solved from zero by the scene's solver R times, the
+two in turn, and ten products with A each time; the medians are printed.
 """
 
 from __future__ import annotations
@@ -69,6 +73,11 @@ def main() -> None:
     parser.add_argument("--solver", choices=("iccg", "cg", "deflated"))
     parser.add_argument("--compare-solvers", action="store_true")
     parser.add_argument(
+        "--compare-precision", type=int, default=0, metavar="R",
+        help="after the timed steps, the next PPE assembled with its matrix in double and in "
+        "single precision, each solved from zero by the scene's solver R times, alternately",
+    )  # fmt: skip
+    parser.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE",
         help="a scene override for every case, e.g. fluid.neighbour_skin=0.6",
     )  # fmt: skip
@@ -113,6 +122,8 @@ def main() -> None:
         )
         if args.compare_solvers:
             compare_solvers(solver)
+        if args.compare_precision > 0:
+            compare_precision(solver, args.compare_precision)
 
 
 def compare_solvers(solver: MPSSolver) -> None:
@@ -143,6 +154,47 @@ def compare_solvers(solver: MPSSolver) -> None:
         f"  fewer iterations than CG: ICCG {counts['cg'] / counts['iccg']:.1f}x, deflated "
         f"{counts['cg'] / counts['deflated']:.1f}x"
     )
+
+
+def compare_precision(solver: MPSSolver, repeats: int) -> None:
+    """The PPE at the current positions (as :func:`compare_solvers`) assembled with the matrix
+    in double and in single precision (fluid.matrix_precision), each solved from zero by the
+    scene's solver ``repeats`` times, the two in turn (so that a busy moment of the machine
+    falls on both); prints the median wall time of a solve and of a product with A."""
+    p = solver.params
+    dt = solver.stable_dt()
+    systems = {}
+    for precision in ("double", "single"):
+        solver.params = dataclasses.replace(p, matrix_precision=precision)
+        systems[precision] = solver.poisson_system(dt)
+    solver.params = p
+    coarse = CoarseSpace(
+        solver.position[systems["double"].particles], solver.domain_min, p.coarse_cell * p.l0
+    )
+    seconds: dict[str, list[float]] = {"double": [], "single": []}
+    products: dict[str, list[float]] = {"double": [], "single": []}
+    counts = {}
+    for _ in range(repeats + 1):  # the first of each compiles, or loads from the cache
+        for precision, system in systems.items():
+            x = np.zeros_like(system.rhs)
+            clock = time.perf_counter()
+            counts[precision], _, _ = solve(
+                system.matrix, system.rhs, x, p.solver, p.tolerance, 10_000, coarse
+            )
+            seconds[precision].append(time.perf_counter() - clock)
+            out = np.empty_like(x)
+            clock = time.perf_counter()
+            for _ in range(10):
+                system.matrix.apply(x, out)
+            products[precision].append((time.perf_counter() - clock) / 10)
+    for precision in systems:
+        print(
+            f"  PPE of {systems[precision].rhs.size} rows, matrix in {precision}: "
+            f"{p.solver} {counts[precision]} iterations from zero, median "
+            f"{1000 * np.median(seconds[precision][1:]):.1f} ms a solve, "
+            f"{1000 * np.median(products[precision][1:]):.2f} ms a product with A "
+            f"({repeats} of each)"
+        )
 
 
 if __name__ == "__main__":

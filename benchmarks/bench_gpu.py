@@ -3,7 +3,8 @@ time per phase, particle-steps per second and wall time per simulated second, an
 two paths' water is apart after the same steps.
 
     python benchmarks/bench_gpu.py [--case NAME ...] [--steps 20] [--cpu-threads 16]
-        [--compare-steps 20] [--gpu-solver deflated|cg ...] [--grid-blocks N ...]
+        [--compare-steps 20] [--gpu-solver deflated|cg ...] [--precision double|single ...]
+        [--grid-blocks N ...]
 
 Cases, each from rest at its preset's scheme (the pressure to a relative residual of 1e-8):
 
@@ -19,6 +20,8 @@ Cases, each from rest at its preset's scheme (the pressure to a relative residua
 
 ``--gpu-solver deflated|cg`` (repeatable) times the GPU with each pressure solver in turn:
 CG with Jacobi and the coarse correction, or with Jacobi alone (default: the preset's).
+``--precision double|single`` (repeatable) times each solver with the pressure matrix's
+off-diagonal entries in that precision in turn (fluid.matrix_precision; default: double).
 ``--grid-blocks N`` (repeatable) times the GPU again with each phase's cooperative grid cut to
 at most N blocks, each N in turn on the same water (its steps follow the default's): fewer
 blocks meet sooner at a grid barrier, more hide the memory's latency better.
@@ -98,6 +101,12 @@ def main() -> None:
         help="the GPU's pressure solver, each given timed in turn (default: the preset's)",
     )
     parser.add_argument(
+        "--precision",
+        choices=("double", "single"),
+        action="append",
+        help="fluid.matrix_precision, each given timed in turn (default: double)",
+    )
+    parser.add_argument(
         "--grid-blocks",
         type=int,
         action="append",
@@ -120,7 +129,9 @@ def main() -> None:
     for case in args.case or list(CASES):
         preset, overrides = CASES[case]
         for solver in args.gpu_solver or [None]:
-            fluid = _time_gpu(case, preset, overrides, solver, args.steps, args.grid_blocks)
+            for precision in args.precision or ["double"]:
+                chosen = {**overrides, "fluid.matrix_precision": precision}
+                fluid = _time_gpu(case, preset, chosen, solver, args.steps, args.grid_blocks)
         if args.cpu_threads > 0 and fluid <= 100_000:
             _time_cpu(case, preset, overrides, args.cpu_threads, args.steps)
             if args.compare_steps > 0:  # the preset's solver on both paths
@@ -158,12 +169,12 @@ def _time_gpu(
         phases = ", ".join(f"{k} {1000 * v / steps:.2f} ms" for k, v in seconds.items())
         grids = ", ".join(f"{k} {v}" for k, v in getattr(device, "_blocks", {}).items())
         print(
-            f"{case} GPU ({scene.fluid.solver}): {fluid} fluid + {len(device.kind) - fluid} "
-            f"wall/dummy particles (set-up and first step {first:.1f} s); {steps / wall:.1f} "
-            f"steps/s, {fluid * steps / wall:.3g} particle-steps/s, {wall / simulated:.1f} s "
-            f"per simulated second (dt {simulated / steps:.3g} s); CG iterations "
-            f"{np.mean(iterations):.0f} (mean); per step: {phases}; neighbour-list width "
-            f"{device.width}; blocks: {grids}"
+            f"{case} GPU ({scene.fluid.solver}, {scene.fluid.matrix_precision}): {fluid} "
+            f"fluid + {len(device.kind) - fluid} wall/dummy particles (set-up and first step "
+            f"{first:.1f} s); {steps / wall:.1f} steps/s, {fluid * steps / wall:.3g} "
+            f"particle-steps/s, {wall / simulated:.1f} s per simulated second (dt "
+            f"{simulated / steps:.3g} s); CG iterations {np.mean(iterations):.0f} (mean); per "
+            f"step: {phases}; neighbour-list width {device.width}; blocks: {grids}"
             + ("" if probes is None else f"; {len(probes.pressure_names)} pressure probes read"),
             flush=True,
         )

@@ -22,8 +22,10 @@
 # default 220), CPU_THREADS (16), GPU_SOLVERS (e.g. "--gpu-solver deflated --gpu-solver cg":
 # the steps part times the GPU with each pressure solver; default the presets'), GRID_BLOCKS
 # (e.g. "--grid-blocks 132 --grid-blocks 264": the steps part times each cooperative grid cut
-# to that many blocks too, after the GPU's most), THREADS (the
-# threads part's counts, default "16 8 4 2 1"), CHUNKSIZE (its parallel loops' chunk size, 0);
+# to that many blocks too, after the GPU's most), PRECISIONS (e.g. "--precision double
+# --precision single": each with fluid.matrix_precision so, in turn), THREADS (the
+# threads part's counts, default "16 8 4 2 1"; THREAD_PRECISIONS, its matrix precisions,
+# default "double", e.g. "double single"), CHUNKSIZE (its parallel loops' chunk size, 0);
 # NUMBA_THREADING_LAYER=tbb with the tbb wheel carried compares TBB's dynamic scheduling.
 #   bash benchmarks/gpu_device.sh OUTDIR [PART ...]   (no part: tests steps moon-jelly, about
 #   9 minutes at most, which a 15-minute device session holds with its start)
@@ -47,7 +49,7 @@ for part in $parts; do
       JELLYSIM_TEST_GPU=1 timeout ${TESTS_LIMIT-240} $py -m pytest -q -p no:cacheprovider tests/gpu -k "not moon_jelly_fine" 2>&1 | tee "$out/tests.log" | tail -15 | tee -a "$out/log" ;;
     steps)
       say "== bench_gpu.py"
-      timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 ${GPU_SOLVERS-} ${GRID_BLOCKS-} 2>&1 | tee -a "$out/log" ;;
+      timeout ${STEPS_LIMIT-220} $py benchmarks/bench_gpu.py --case moon-jelly-water --case tank-3d --case tank-3d-million --steps 20 --cpu-threads ${CPU_THREADS-16} --compare-steps 20 ${GPU_SOLVERS-} ${PRECISIONS-} ${GRID_BLOCKS-} 2>&1 | tee -a "$out/log" ;;
     moon-jelly)
       say "== moon-jelly, three pulses on the GPU (bell_pulses.py --full --pulses 3 --no-tentacles)"
       timeout 150 $py benchmarks/bell_pulses.py --full --pulses 3 --no-tentacles --set fluid.device='"cuda"' 2>&1 | tee "$out/moon-jelly.log" | grep -E "time per phase|as it is|pulse |Error|error" | tee -a "$out/log" ;;
@@ -56,9 +58,10 @@ for part in $parts; do
       timeout 150 $py benchmarks/bench_gpu.py --case spheric-test2-million --steps 20 2>&1 | tee -a "$out/log" ;;
     threads)
       say "== CPU threads: bench_fluid.py --case tank-3d"
+      for precision in ${THREAD_PRECISIONS-double}; do
       for threads in ${THREADS-16 8 4 2 1}; do
-        timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads --chunksize ${CHUNKSIZE-0} 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads: /" | tee -a "$out/log"
-      done ;;
+        timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads --chunksize ${CHUNKSIZE-0} --set fluid.matrix_precision=$precision 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads, $precision: /" | tee -a "$out/log"
+      done; done ;;
     dam-break)
       say "== jellysim run dam-break-2d --device cuda"
       ( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"

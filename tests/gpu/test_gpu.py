@@ -37,6 +37,14 @@ CASES = {
     "standard-3d": (3, "square", {}),
     # the two-level preconditioner (Jacobi and the coarse space) against the CPU's deflated CG
     "mixed-3d-fcc-two-level": (3, "fcc", {**MIXED, "solver": "deflated"}),
+    # the matrix in single precision on both (on the CPU, against the double matrix, ten
+    # steps of these tanks left 1.4e-10 l0 and 2.4e-8 g dt, pressures 8e-9 apart)
+    "mixed-3d-fcc-two-level-single": (
+        3,
+        "fcc",
+        {**MIXED, "solver": "deflated", "matrix_precision": "single"},
+    ),  # fmt: skip
+    "standard-3d-single": (3, "square", {"matrix_precision": "single"}),
 }
 
 
@@ -51,7 +59,8 @@ def _solvers(case: str) -> tuple[MPSSolver, gpu.GPUSolver, np.ndarray]:
     positions = np.concatenate([water, walls])
     kinds = np.concatenate([np.full(len(water), FLUID, np.int8), kinds])
     params = MPSParameters(dim=dim, l0=L0, lattice=lattice, tolerance=1e-12, **options)
-    return MPSSolver(params, positions, kinds), gpu.GPUSolver(params, positions, kinds), kinds
+    cpu = MPSSolver(params, positions, kinds)
+    return cpu, gpu.GPUSolver(params, positions, kinds), kinds
 
 
 @pytest.mark.parametrize("case", list(CASES))

@@ -184,6 +184,9 @@ def test_scheme_keys_reach_the_solver() -> None:
         )
     )
     assert (chosen.source, chosen.gradient) == ("mixed", "corrected")
+    assert dam.matrix_precision == "double"  # fluid.matrix_precision's default
+    single = jellysim.load_scene("dam-break-2d", {"fluid.matrix_precision": "single"})
+    assert mps_parameters(single).matrix_precision == "single"
 
 
 def test_hydrostatic_preset_plots_the_hydrostatic_law(tmp_path: Path) -> None:

@@ -258,23 +258,41 @@ def _device_bytes(obj: Any, seen: set[int] | None = None, depth: int = 0) -> int
 
 
 @pytest.mark.skipif(not gpu.simulated(), reason="the CUDA simulator is off")
-@pytest.mark.parametrize("name", ["dam-break-2d", "hydrostatic-3d", "moon-jelly"])
-def test_gpu_memory_is_the_gpu_paths_arrays(name: str) -> None:
+@pytest.mark.parametrize(
+    ("name", "precision"),
+    [
+        ("dam-break-2d", "double"),
+        ("dam-break-2d", "single"),  # fluid.matrix_precision: 4-byte coefficients
+        ("hydrostatic-3d", "double"),
+        ("moon-jelly", "double"),
+    ],
+)
+def test_gpu_memory_is_the_gpu_paths_arrays(name: str, precision: str) -> None:
     """On ``fluid.device = "cuda"`` the estimate's GPU parts are the device arrays the GPU path
     allocates as it starts (counted in the CUDA simulator, whose arrays have the GPU's sizes):
     the particles, the neighbour lists at their first width, the cell grid and a soft bell's
     implicit springs, within 3 % (measured 0.2 % under to 0.9 % over: the lattice's sites per
     volume against the particles built); the coarse space, made at the first
     solve, is left out of the comparison. The solver's arrays leave the host's estimate."""
-    scene = load_scene(name, {"fluid.device": "cuda"})
+    chosen = {"fluid.matrix_precision": precision}
+    scene = load_scene(name, {"fluid.device": "cuda", **chosen})
     costs = estimate(scene)
     allocated = _device_bytes(jellysim.Simulation(scene))
     estimated = costs.gpu_memory_bytes - costs.gpu_memory.get("GPU: coarse space", 0)
     assert 0.97 * allocated <= estimated <= 1.03 * allocated
-    on_cpu = estimate(load_scene(name))
+    on_cpu = estimate(load_scene(name, chosen))
     assert "Poisson matrix" in on_cpu.memory and "Poisson matrix" not in costs.memory
     assert costs.memory_bytes < on_cpu.memory_bytes and not on_cpu.gpu_memory
     assert "on the GPU" in costs.describe()
+
+
+def test_a_single_precision_matrix_is_estimated_smaller() -> None:
+    """fluid.matrix_precision = "single": the Poisson matrix's entries take 4 + 4 bytes instead
+    of 4 + 8 (and the diagonal's doubles are kept apart), so its share is about two thirds."""
+    double = estimate(load_scene("tank-3d")).memory["Poisson matrix"]
+    single = estimate(load_scene("tank-3d", {"fluid.matrix_precision": "single"}))
+    ratio = single.memory["Poisson matrix"] / double
+    assert 0.6 < ratio < 0.72
 
 
 # Measured on an H200 (docs/performance.md, 2026-11-27; benchmarks/gpu_device.sh): wall seconds

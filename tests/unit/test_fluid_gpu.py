@@ -12,6 +12,7 @@ The same tests on a real GPU, at full size: tests/gpu (make test-gpu).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -58,6 +59,8 @@ CASES = {
     "standard-2d": (2, "square", {"surface": "neighbour-count"}, 2),
     # hydrostatic-3d's model on the fcc lattice
     "mixed-3d": (3, "fcc", MIXED, 1),
+    # the matrix in single precision on both (fluid.matrix_precision)
+    "mixed-2d-single": (2, "hexagonal", {**MIXED, "matrix_precision": "single"}, 2),
 }
 
 
@@ -111,8 +114,6 @@ def test_gpu_step_matches_cpu_with_collisions_and_viscosity() -> None:
     viscous term and the either-density surface all act in the step (checked on the CPU: with
     another restitution or the standard surface criterion its result is another), and the GPU
     gives the CPU's step."""
-    import dataclasses
-
     cpu, device, kinds, _ = _pair("mixed-2d")
     state = _stirred(cpu)
     cpu.restore(state)
@@ -205,6 +206,39 @@ def test_gpu_step_matches_cpu(case: str) -> None:
     # the comparison is of steps that did something: the water moved, under a pressure
     assert np.abs(device.velocity[fluid]).max() > 0.5 * g_dt
     assert largest > 0.0
+
+
+def test_a_single_precision_matrix_rounds_the_entries_and_keeps_each_rows_excess() -> None:
+    """fluid.matrix_precision = "single": after one step from the same state (the PPE is
+    assembled at r*, which no pressure has touched yet), the single-precision coefficients are
+    the double ones rounded, slot for slot, and each row's diagonal less its coefficients, the
+    excess that its free-surface neighbours and the compressibility give, is the double one
+    to the round-off of the sums (a diagonal rounded as well would leave it 6e-8 of the
+    diagonal off, as large as the whole excess of an inner row)."""
+    dim, lattice, options, _ = CASES["mixed-2d"]
+    positions, kinds = _particles(dim, lattice)
+    systems = {}
+    for precision in ("double", "single"):
+        params = MPSParameters(
+            dim=dim, l0=L0, lattice=lattice, tolerance=1e-12, matrix_precision=precision,
+            **options,
+        )  # fmt: skip
+        device = gpu.GPUSolver(params, positions, kinds)
+        device.step(device.stable_dt())
+        count = device._list_count.copy_to_host()
+        unknown = device._unknown.copy_to_host() == 1
+        filled = np.arange(device.width)[:, None] < count[None, :]
+        coefficient = np.where(filled, device._coefficient.copy_to_host(), 0.0)
+        systems[precision] = coefficient, device._diagonal.copy_to_host(), unknown
+    (c64, d64, unknown), (c32, d32, unknown32) = systems["double"], systems["single"]
+    np.testing.assert_array_equal(unknown, unknown32)
+    assert c32.dtype == np.float32 and c64.dtype == np.float64
+    np.testing.assert_array_equal(c64[:, unknown].astype(np.float32), c32[:, unknown])
+    assert np.any(c64[:, unknown] != c32[:, unknown])
+    excess64 = d64[unknown] - c64[:, unknown].sum(axis=0)
+    excess32 = d32[unknown] - c32[:, unknown].astype(np.float64).sum(axis=0)
+    np.testing.assert_allclose(excess32, excess64, rtol=0, atol=1e-12 * d64.max())
+    assert np.abs(d32[unknown] - d64[unknown]).max() > 1e-9 * d64.max()  # not merely copied
 
 
 def test_a_device_force_of_the_wrong_shape_is_refused_before_the_step() -> None:

@@ -33,7 +33,14 @@ import scipy.sparse
 import scipy.sparse.linalg
 from numba import njit, prange
 
-from jellysim.fluid.linalg import FAST, Matrix, dot, multiply, preconditioned_cg
+from jellysim.fluid.linalg import (
+    FAST,
+    Matrix,
+    diagonal_values,
+    dot,
+    multiply,
+    preconditioned_cg,
+)
 
 
 def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[np.ndarray, int]:
@@ -89,6 +96,7 @@ def _restricted_rows(
     its columns in the order first met. Two sweeps over chunks of aggregates in parallel: one
     counts the columns, one sums."""
     n = matrix.indptr.shape[0] - 1
+    split = matrix.diagonal_value.shape[0] > 0
     chunks = (m + _CHUNK - 1) // _CHUNK
     indptr = np.zeros(m + 1, dtype=np.int64)
     for c in prange(chunks):
@@ -120,6 +128,8 @@ def _restricted_rows(
                         indices[end] = j
                         end += 1
                     data[slot[j]] += matrix.data[p]
+                if split:  # the diagonal in double (its slot in the row holds 0)
+                    data[slot[i]] += matrix.diagonal_value[i]
     return indptr, indices, data
 
 
@@ -254,7 +264,7 @@ class Deflation:
 
     def __init__(self, matrix: Matrix, position: np.ndarray, origin: np.ndarray, size: float):
         self.key, self.m = aggregates(position, origin, size)
-        self.inverse_diagonal = 1.0 / matrix.data[matrix.diagonal]
+        self.inverse_diagonal = 1.0 / diagonal_values(matrix)
         self._smoothed = np.empty(matrix.diagonal.shape[0])  # y of :meth:`precondition`
         self.restriction = restricted_operator(matrix, self.key, self.m)
         coarse = coarse_operator(self.restriction, self.key, self.m)

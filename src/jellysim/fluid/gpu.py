@@ -340,7 +340,9 @@ class GPUSolver:
         # slot-major (width, N): the threads of a warp read neighbouring addresses
         self._index = da((width, self.n), dtype=np.int32)
         self._distance = da((width, self.n))
-        self._coefficient = da((width, self.n))
+        # the PPE's off-diagonal entries, in single precision with fluid.matrix_precision
+        real = np.float32 if self.params.matrix_precision == "single" else np.float64
+        self._coefficient = da((width, self.n), dtype=real)
         self._list_count = da(self.n, dtype=np.int32)
 
     def _search(self, position: Any, rows: Any, every: Any) -> None:
@@ -458,6 +460,7 @@ class GPUSolver:
                 p.density / dt if mixed else p.density / dt**2,
                 p.mixed_relaxation * p.density / dt**2, ref_nd.n0, self._d_pressure,
                 self._coefficient, self._diagonal, self._inverse_diagonal, self._b, self._x,
+                p.matrix_precision == "single",
             )  # fmt: skip
             sync()
         with timer("solve"):

@@ -8,7 +8,7 @@ the equations and the summation orders are :mod:`jellysim.fluid.gpu`'s docstring
 
 import math
 
-from numba import cuda, float64, int32
+from numba import cuda, float32, float64, int32
 
 # The constants the kernels read, written here and not imported: Numba compiles a global's value
 # into the machine code and throws a cached kernel away only when the kernel's own file changes,
@@ -349,13 +349,16 @@ def classify(
 def assemble(
     i, position, velocity, kind, alive, index, distance, count, unknown, re_lap, a_coefficient,
     shift, re_grad, div_coefficient, mixed, source_scale, mixed_scale, n0, density_star,
-    density_start, pressure, coefficient, diagonal, inverse_diagonal, b, x,
+    density_start, pressure, coefficient, diagonal, inverse_diagonal, b, x, single,
 ):  # fmt: skip
     """Eq. (F8)-(F9): the PPE row of particle i (``coefficient[m, i]`` = a_ij for unknown
     neighbours, 0 else; ``diagonal``), its source ``b`` and the warm start ``x``; zeros for
     the particles that are no unknowns (diagonal, inverse_diagonal, b, x). ``coefficient``'s
     slots past a row's count, and its rows for the particles that are no unknowns (diagonal
-    0), are left as they are: the CG and the coarse matrix read neither."""
+    0), are left as they are: the CG and the coarse matrix read neither. With ``single``
+    (fluid.matrix_precision, ``coefficient`` float32) the unknown neighbours' a_ij are
+    rounded to single precision and the diagonal (double) sums them so rounded: the row's
+    excess over them, its free-surface neighbours' a_ij and the shift, stays the double one."""
     if unknown[i] == 0:
         diagonal[i] = 0.0
         inverse_diagonal[i] = 0.0
@@ -373,9 +376,11 @@ def assemble(
             continue
         if r < re_lap:
             a = a_coefficient * weight(r, re_lap)
-            total += a
             if unknown[j] == 1:
+                if single:
+                    a = float64(float32(a))
                 coefficient[m, i] = a
+            total += a
         if mixed and r < re_grad:
             dot = 0.0
             for k in range(dim):
@@ -946,11 +951,11 @@ def assembly_phase(
     position, velocity, kind, alive, index, distance, list_count, re_nd, density, within,
     start_density, threshold, by_count, count_threshold, either, unknown, counts, re_lap,
     a_coefficient, shift, re_grad, div_coefficient, mixed, source_scale, mixed_scale, n0,
-    pressure, coefficient, diagonal, inverse_diagonal, b, x,
+    pressure, coefficient, diagonal, inverse_diagonal, b, x, single,
 ):  # fmt: skip
     """The Poisson system at r*: the number density (Eq. F2), the unknowns (:func:`classify`,
     the free-surface particles counted in ``counts[SURFACE]`` from 0) and each row
-    (:func:`assemble`)."""
+    (:func:`assemble`; ``single``: its entries rounded to single precision)."""
     grid = cuda.cg.this_grid()
     first = cuda.grid(1)
     stride = cuda.gridsize(1)
@@ -971,7 +976,7 @@ def assembly_phase(
             i, position, velocity, kind, alive, index, distance, list_count, unknown, re_lap,
             a_coefficient, shift, re_grad, div_coefficient, mixed, source_scale, mixed_scale,
             n0, density, start_density, pressure, coefficient, diagonal, inverse_diagonal, b,
-            x,
+            x, single,
         )  # fmt: skip
 
 

@@ -81,9 +81,12 @@ class Matrix(NamedTuple):
 
     indptr: np.ndarray  # (n + 1,) int64
     indices: np.ndarray  # (nnz,) int32 (the products with A are bound by memory bandwidth)
-    data: np.ndarray  # (nnz,) float64
+    data: np.ndarray  # (nnz,) float64, or float32 (see diagonal_value)
     diagonal: np.ndarray  # (n,) int64
     blocks: np.ndarray  # (2,) int64
+    # Empty, or with ``data`` in single precision (fluid.matrix_precision) the diagonal in double,
+    # (n,) float64: ``data``'s diagonal slots then hold 0 (:func:`diagonal_values`).
+    diagonal_value: np.ndarray
 
     def apply(self, x: np.ndarray, out: np.ndarray) -> None:
         """``out = A x``."""
@@ -130,12 +133,27 @@ class Identity(NamedTuple):
 
 @njit(cache=True, parallel=True, fastmath=FAST)
 def multiply(matrix: Matrix, x: np.ndarray, out: np.ndarray) -> None:
-    """``out = A x`` (row-wise gather)."""
+    """``out = A x`` (row-wise gather; with a diagonal in double, ``diagonal_value``, it first,
+    then the row's entries, whose diagonal slot holds 0)."""
+    split = matrix.diagonal_value.shape[0] > 0
     for row in prange(matrix.indptr.shape[0] - 1):
         total = 0.0
+        if split:
+            total = matrix.diagonal_value[row] * x[row]
         for p in range(matrix.indptr[row], matrix.indptr[row + 1]):
             total += matrix.data[p] * x[matrix.indices[p]]
         out[row] = total
+
+
+@njit(cache=True)
+def diagonal_values(matrix: Matrix) -> np.ndarray:
+    """A's diagonal, (n,) float64: ``diagonal_value``, or the diagonal entries of ``data``."""
+    if matrix.diagonal_value.shape[0] > 0:
+        return matrix.diagonal_value.copy()
+    out = np.empty(matrix.diagonal.shape[0])
+    for i in range(matrix.diagonal.shape[0]):
+        out[i] = matrix.data[matrix.diagonal[i]]
+    return out
 
 
 @njit(cache=True)
@@ -166,7 +184,10 @@ def _factor_rows(
             # rows i come in increasing order: row k's upper entries fill in column order
             out[upper_fill[k]] = out[p]
             upper_fill[k] += 1
-        pivot = matrix.data[diagonal[i]] * (1.0 + shift)
+        if matrix.diagonal_value.shape[0] > 0:
+            pivot = matrix.diagonal_value[i] * (1.0 + shift)
+        else:
+            pivot = matrix.data[diagonal[i]] * (1.0 + shift)
         for p in range(start, diagonal[i]):
             pivot -= out[p] * out[p]
             dense_row[indices[p]] = 0.0

@@ -48,6 +48,8 @@ from jellysim.fluid.solvers import PRESSURE_SOLVERS, CoarseSpace, FluidDiverged,
 SOURCES = ("standard", "mixed")
 SURFACES = ("standard", "neighbour-count", "either-density")
 GRADIENTS = ("standard", "corrected", "conservative")
+# fluid.matrix_precision: the type in which the PPE's off-diagonal entries are stored
+MATRIX_PRECISIONS = {"double": np.float64, "single": np.float32}
 # beta of the surface criterion n < beta n0 when none is given, per lattice. 0.97 is Koshizuka &
 # Oka's for the square lattice, whose second row under a flat surface has n = 0.992 n0 (it misses
 # the neighbour two spacings up). On the hexagonal lattice the second row misses three (one at
@@ -106,6 +108,12 @@ class MPSParameters:
       "deflated" (CG with Jacobi and a coarse problem on aggregates ``coarse_cell`` l0 wide,
       :mod:`jellysim.fluid.deflation`); ``tolerance`` is the relative residual
       ``|b - A p| / |b|``.
+    - ``matrix_precision``: "double", or "single": the off-diagonal entries of A are rounded to
+      single precision where they are stored, and the diagonal, kept in double, sums the rounded
+      entries, so that each row's excess over its unknown neighbours (its free-surface
+      neighbours and the compressibility) is the double one. A stays exactly symmetric and
+      positive definite; a product with A reads 8 bytes an entry instead of 12
+      (:func:`jellysim.fluid.poisson.assemble_poisson`, docs/decisions.md).
     - ``neighbour_skin`` (l0): 0, a cell search for each neighbour list (two a step); above 0,
       one search with the radius widened by the skin serves as a Verlet list, cut to the radius
       at each use and searched again only when some particle has moved half the skin since
@@ -144,6 +152,7 @@ class MPSParameters:
     surface: str = "standard"
     gradient: str = "standard"
     solver: str = "iccg"
+    matrix_precision: str = "double"
     coarse_cell: float = 4.0
     neighbour_skin: float = 0.0
     tolerance: float = 1e-8
@@ -165,6 +174,7 @@ class MPSParameters:
             ("surface", self.surface, SURFACES),
             ("gradient", self.gradient, GRADIENTS),
             ("solver", self.solver, tuple(PRESSURE_SOLVERS)),
+            ("matrix_precision", self.matrix_precision, MATRIX_PRECISIONS),
         ):
             if value not in allowed:
                 raise ValueError(f"{name} = {value!r}; allowed: {', '.join(allowed)}")
@@ -446,8 +456,10 @@ class MPSSolver:
             name: [np.empty(0, dtype=np.int32), np.empty(0)]
             for name in ("start", "star", "candidates")
         }
+        real = MATRIX_PRECISIONS[params.matrix_precision]  # the off-diagonal entries
         self._matrix_buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
-            np.empty(0, dtype=np.int32), np.empty(0), np.empty(0, dtype=np.int32), np.empty(0)
+            np.empty(0, dtype=np.int32), np.empty(0, dtype=real), np.empty(0, dtype=np.int32),
+            np.empty(0, dtype=real),
         )  # fmt: skip
 
     # ------------------------------------------------------------------------------ time step
@@ -776,9 +788,10 @@ class MPSSolver:
         particles[self._row_of[unknown]] = np.flatnonzero(unknown)
         shift = p.density * p.compressibility / dt**2
         ordered = p.solver != "deflated"  # the deflated solver needs no column order
-        no_int, no_real = np.empty(0, dtype=np.int32), np.empty(0)
+        no_int = np.empty(0, dtype=np.int32)
+        no_real = np.empty(0, dtype=MATRIX_PRECISIONS[p.matrix_precision])
         buffers = self._matrix_buffers if reuse else (no_int, no_real, no_int, no_real)
-        indptr, indices, data, diagonal, spare_indices, spare_data = assemble_poisson(
+        indptr, indices, data, diagonal, spare_indices, spare_data, value = assemble_poisson(
             nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered, buffers
         )
         if reuse and ordered:
@@ -786,7 +799,8 @@ class MPSSolver:
         elif reuse:
             self._matrix_buffers = (indices, data, spare_indices, spare_data)
         nnz = int(indptr[-1])
-        return Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy()), particles
+        matrix = Matrix(indptr, indices[:nnz], data[:nnz], diagonal, blocks[:2].copy(), value)
+        return matrix, particles
 
     def poisson_source(
         self, dt: float, particles: np.ndarray, neighbours: Neighbours

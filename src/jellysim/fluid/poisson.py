@@ -90,7 +90,7 @@ def assemble_poisson(
     diagonal_shift: float,
     sort_columns: bool,
     buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Matrix of the pressure Poisson equation, Eq. (F8), over the unknown particles (live fluid
     and wall particles not on the free surface; ``row_of`` numbers them).
 
@@ -105,6 +105,13 @@ def assemble_poisson(
     reused for the rows in neighbour order (int32 and float64) and the sorted ones (likewise),
     see :func:`room`; the returned (indices, data) run past ``indptr[-1]``, and the two
     buffers of the other order come after them, to be passed again next time.
+
+    With real buffers of single precision (fluid.matrix_precision = "single") the off-diagonal
+    entries are rounded to it and the diagonal, in double, sums the rounded a_ij of the
+    unknown neighbours: each row's excess over them (its free-surface neighbours' a_ij and
+    the shift) is the double one, so A x keeps the double precision of the differences
+    p_j - p_i that it is made of (docs/decisions.md). The diagonal is then returned last,
+    (n_rows,) float64, and its slots in ``data`` hold 0; otherwise the last array is empty.
     """
     n = kind.shape[0]
     re = constants.re_laplacian
@@ -126,6 +133,8 @@ def assemble_poisson(
     # Rows in neighbour order, the diagonal first
     unsorted_indices = room(buffers[0], indptr[n_rows])
     unsorted_data = room(buffers[1], indptr[n_rows])
+    single = unsorted_data.itemsize == 4  # float32 buffers: fluid.matrix_precision single
+    diagonal_value = np.empty(n_rows if single else 0)
     for row in prange(n_rows):
         i = particle_of[row]
         start = indptr[row]
@@ -138,14 +147,23 @@ def assemble_poisson(
             if r >= re or kind[j] == DUMMY or not alive[j]:
                 continue
             a = coefficient * weight(r, re)
-            total += a
             if row_of[j] >= 0:
+                if single:
+                    a = float(np.float32(a))
                 unsorted_indices[end] = row_of[j]
                 unsorted_data[end] = -a
                 end += 1
-        unsorted_data[start] = total + diagonal_shift
+            total += a
+        if single:
+            unsorted_data[start] = 0.0
+            diagonal_value[row] = total + diagonal_shift
+        else:
+            unsorted_data[start] = total + diagonal_shift
     if not sort_columns:
-        return indptr, unsorted_indices, unsorted_data, indptr[:-1].copy(), buffers[2], buffers[3]
+        return (
+            indptr, unsorted_indices, unsorted_data, indptr[:-1].copy(), buffers[2], buffers[3],
+            diagonal_value,
+        )  # fmt: skip
     # Sorted columns by transposition: A is symmetric to the last bit (r_ij and r_ji are the
     # same floating-point numbers), and sweeping the rows in order appends to each transposed
     # row its columns in increasing order.
@@ -162,4 +180,4 @@ def assemble_poisson(
             data[q] = unsorted_data[p]
             if column == row:
                 diagonal[row] = q
-    return indptr, indices, data, diagonal, unsorted_indices, unsorted_data
+    return indptr, indices, data, diagonal, unsorted_indices, unsorted_data, diagonal_value

@@ -74,6 +74,7 @@ def mps_parameters(scene: Scene) -> MPSParameters:
         surface_repulsion=f.surface_repulsion,
         lattice=f.lattice,
         solver=f.solver,
+        matrix_precision=f.matrix_precision,
         coarse_cell=f.coarse_cell,
         neighbour_skin=f.neighbour_skin,
         tolerance=f.tolerance,

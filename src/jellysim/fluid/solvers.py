@@ -85,7 +85,7 @@ def _incomplete_cholesky_cg(
 ) -> tuple[int, float, float]:
     """ICCG: IC(0) is tried unshifted, then with the diagonal shifts ``IC_SHIFTS`` in turn if a
     pivot is not positive."""
-    factor = np.zeros_like(matrix.data)
+    factor = np.zeros(matrix.data.shape)  # L in double, whatever A's entries are stored in
     for shift in (0.0, *IC_SHIFTS):
         if incomplete_cholesky(matrix, shift, factor):
             break

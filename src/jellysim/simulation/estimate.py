@@ -102,6 +102,7 @@ FRAME_SECONDS = 2.0e-3
 LONG_RUN_SECONDS = 600.0
 
 FLOAT, INDEX, LONG = 8, 4, 8  # float64 values, int32 neighbour and column indices, int64
+SINGLE = 4  # a float32 value (the PPE matrix's entries with fluid.matrix_precision "single")
 # Per MPS particle: seven (N, D) float arrays (position, velocity and their step copies,
 # acceleration, start and Verlet reference positions), five (N,) 8-byte ones (pressure, number
 # densities, neighbour count, row number) and three of bytes (alive, kind, reference alive).
@@ -503,7 +504,11 @@ def _fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[str,
     # a wall's dummy neighbours (about half of them) have no entry in its row
     nonzeros = (counts.fluid + 0.5 * counts.wetted) * (1 + _neighbours(p, p.laplacian_radius))
     orders = 1 if p.solver == "deflated" else 2  # neighbour order, and sorted for IC(0)
-    matrix = nonzeros * entry * orders + solid * 6 * FLOAT  # + row pointers, diagonal, rhs ...
+    # + row pointers, diagonal, rhs ...; with fluid.matrix_precision "single" 4-byte values and
+    # the diagonal's doubles apart
+    single = p.matrix_precision == "single"
+    value = SINGLE if single else FLOAT
+    matrix = nonzeros * (INDEX + value) * orders + solid * (6 + single) * FLOAT
     if p.solver == "iccg":
         # the factor in the matrix's pattern, its compact triangles, a dense row, CG's vectors
         solver = nonzeros * (FLOAT + entry) + solid * 6 * FLOAT
@@ -576,9 +581,11 @@ def _gpu_fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[
     extent = [f.tank_width] + ([f.tank_depth] if dim == 3 else []) + [f.tank_height]
     search = p.neighbour_radius * p.l0
     cells = math.prod(int((e + 2 * behind) / search) + 3 for e in extent)
+    # a slot's PPE coefficient in 4 bytes with fluid.matrix_precision "single"
+    slot = GPU_SLOT_BYTES - (FLOAT - SINGLE if p.matrix_precision == "single" else 0)
     out = {
         "GPU: MPS particles": n * (GPU_STATE_BYTES[0] * dim * FLOAT + GPU_STATE_BYTES[1]),
-        "GPU: neighbour lists": n * (width * GPU_SLOT_BYTES + INDEX),
+        "GPU: neighbour lists": n * (width * slot + INDEX),
         "GPU: cell grid": cells * 3 * INDEX,
     }
     if p.solver == "deflated":  # E^-1 dense, with the aggregates' map over the cells
