@@ -285,27 +285,35 @@ def test_gpu_runs_are_the_same_to_the_bit_and_resume_across_devices() -> None:
         second.velocity[0, 0] = 1.0
 
 
-def _still_square(width: float, solver: str) -> tuple[MPSSolver, gpu.GPUSolver]:
-    """A square 2-D tank ``width`` (m) wide filled ``width`` deep, at rest, on both paths."""
+def _still_square(
+    width: float, solver: str, precision: str = "double"
+) -> tuple[MPSSolver, gpu.GPUSolver]:
+    """A square 2-D tank ``width`` (m) wide filled ``width`` deep, at rest, on both paths
+    (the matrix's entries in ``precision``, fluid.matrix_precision)."""
     walls, kinds = tank(width, width, L0, dim=2, lattice="square")
     water = water_block(0.0, width, 0.0, width, L0, lattice="square")
     positions = np.concatenate([water, walls])
     kinds = np.concatenate([np.full(len(water), FLUID, np.int8), kinds])
-    params = MPSParameters(dim=2, l0=L0, lattice="square", tolerance=1e-8, solver=solver)
+    params = MPSParameters(
+        dim=2, l0=L0, lattice="square", tolerance=1e-8, solver=solver,
+        matrix_precision=precision,
+    )  # fmt: skip
     return MPSSolver(params, positions, kinds), gpu.GPUSolver(params, positions, kinds)
 
 
-def test_the_two_level_preconditioner_saves_iterations(monkeypatch) -> None:
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_the_two_level_preconditioner_saves_iterations(monkeypatch, precision: str) -> None:
     """fluid.solver = "deflated" on the GPU: Jacobi plus the coarse correction on aggregates
     (blocks of search cells, E^-1 dense). On a tank of 900 water particles with 72 aggregates
     (one per ten particles here: the run's default is one per 200, too few in so small a tank)
     the CG takes at most 60 % of the iterations of plain CG (measured: 22 against the CPU's
     51; Jacobi on the GPU took 48), and its pressure is the CPU deflated solver's to the
     tolerance's scale (both solve to 1e-8 of |b|: the pressures agree to 1e-6 of the
-    largest; measured 1e-8)."""
+    largest; measured 1e-8). With the matrix's entries in single precision too (the coarse
+    matrix summed from the rounded coefficients, on both paths)."""
     monkeypatch.setattr(gpu, "COARSE_PARTICLES", 10)
     plain, _ = _still_square(0.3, "cg")
-    cpu, device = _still_square(0.3, "deflated")
+    cpu, device = _still_square(0.3, "deflated", precision)
     dt = cpu.stable_dt()
     reference = plain.step(dt).iterations
     cpu.step(dt)
