@@ -54,7 +54,7 @@ def main() -> None:
     solver.params = dataclasses.replace(solver.params, solver="iccg")
     system = solver.poisson_system(solver.stable_dt())
     matrix, rhs = system.matrix, system.rhs
-    factor = np.zeros_like(matrix.data)
+    factor = np.zeros(matrix.data.shape)  # L in double, as the solver's
     linalg.incomplete_cholesky(matrix, 0.0, factor)  # compile or load from the cache
     factorize, _ = best(args.repeats, lambda: linalg.incomplete_cholesky(matrix, 0.0, factor))
     compact, compacted = best(args.repeats, lambda: linalg.compact_factor(matrix, factor))

@@ -72,6 +72,8 @@ def main() -> None:
         m, n = s.matrix, s.rhs.size
         end = m.indptr[-1]
         a = scipy.sparse.csr_matrix((m.data[:end], m.indices[:end], m.indptr), shape=(n, n))
+        if m.diagonal_value.size:  # fluid.matrix_precision "single": the diagonal apart
+            a = (a.astype(np.float64) + scipy.sparse.diags(m.diagonal_value)).tocsr()
         return a, s.rhs.copy(), solver.position[s.particles], solver.pressure[s.particles]
 
     def keys(position: np.ndarray) -> np.ndarray:

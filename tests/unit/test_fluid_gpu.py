@@ -189,6 +189,9 @@ def test_gpu_step_matches_cpu(case: str) -> None:
     if case == "standard-2d":
         force = np.zeros_like(cpu.position)  # N/m3
         force[:, 0] = 5e3 * cpu.position[:, 1] / cpu.position[:, 1].max()
+    single = case.endswith("-single")  # both paths' matrices in single precision
+    assert (device._coefficient.dtype == np.float32) == single
+    assert (cpu._matrix_buffers[1].dtype == np.float32) == single
     for _ in range(steps):
         dt = cpu.stable_dt()
         assert device.stable_dt() == pytest.approx(dt, rel=1e-14)
@@ -319,6 +322,7 @@ def test_the_two_level_preconditioner_saves_iterations(monkeypatch, precision: s
     cpu.step(dt)
     stats = device.step(dt)
     assert device.coarse_aggregates > 50
+    assert device._coefficient.dtype == {"double": np.float64, "single": np.float32}[precision]
     assert stats.iterations <= 0.6 * reference
     assert np.abs(device.pressure - cpu.pressure).max() <= 1e-6 * cpu.pressure.max()
 

@@ -240,12 +240,24 @@ def test_a_single_precision_matrix_rounds_the_entries_and_keeps_each_rows_excess
     assert np.linalg.norm(r) <= 1.01e-10 * np.linalg.norm(single.rhs)
 
 
+def test_a_change_of_matrix_precision_reaches_the_steps() -> None:
+    """The matrix buffers a solver keeps from step to step follow its parameters: a step after
+    ``params`` changed to single precision assembles in single precision (and back)."""
+    fluid = dam_break(solver="deflated")
+    fluid.step(5e-4)
+    for precision, dtype in (("single", np.float32), ("double", np.float64)):
+        fluid.params = dataclasses.replace(fluid.params, matrix_precision=precision)
+        fluid.step(5e-4)
+        assert fluid._matrix_buffers[1].dtype == dtype
+
+
 def test_a_single_precision_run_follows_the_double_one() -> None:
     """The dam break 40 steps after release with the matrix in single precision: the same flow
     on another round-off path. Measured: pressures 6e-6 of the largest apart, positions 3e-8
-    l0 (as close as a solve to 1e-10 instead of 1e-8 gives: 6e-5 and 2e-7); the bounds are
-    ten times those. Rounding the diagonal as well left them 3e-3 and 1e-5 l0 apart: that
-    loses the differences p_j - p_i that A x is made of (docs/decisions.md)."""
+    l0 (ten times closer than a solve to 1e-10 instead of 1e-8 leaves the double run: 6e-5
+    and 2e-7); the bounds are ten times those. Rounding the diagonal as well left them 3e-3
+    and 1e-5 l0 apart: that loses the differences p_j - p_i that A x is made of
+    (docs/decisions.md)."""
     runs = []
     for precision in ("double", "single"):
         fluid = dam_break(solver="deflated", matrix_precision=precision)

@@ -790,6 +790,8 @@ class MPSSolver:
         ordered = p.solver != "deflated"  # the deflated solver needs no column order
         no_int = np.empty(0, dtype=np.int32)
         no_real = np.empty(0, dtype=MATRIX_PRECISIONS[p.matrix_precision])
+        if self._matrix_buffers[1].dtype != no_real.dtype:  # params changed since the last
+            self._matrix_buffers = (no_int, no_real, no_int, no_real)
         buffers = self._matrix_buffers if reuse else (no_int, no_real, no_int, no_real)
         indptr, indices, data, diagonal, spare_indices, spare_data, value = assemble_poisson(
             nb, self.kind, self.alive, self._row_of, n_rows, c, shift, ordered, buffers
