@@ -284,6 +284,52 @@ def test_search_writes_into_a_buffer_that_holds_the_list_and_grows_one_that_does
         assert index.size >= total
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: int) -> None:
+    """The search fills rows a chunk at a time into scratch, a wave of chunks at a time, and
+    searches a chunk that outgrew its scratch again straight into the list: with no room (every
+    chunk outgrows), little room (some do), ample room (none do), over several waves and into
+    buffers too small, too small for all but the first wave, and large enough, the list is the
+    same to the bit."""
+    rng = np.random.default_rng(17)
+    n = 7000  # about three waves of active rows
+    position = rng.uniform(0.0, 1.0, (n, dim)) * np.array([1.0, 0.5, 0.4][:dim])
+    position[:500] *= 0.12  # a dense corner: its chunks are wider than the others
+    alive = rng.random(n) > 0.05
+    rows = rng.random(n) > 0.1
+    radius = 0.035 if dim == 3 else 0.02
+    active = int(np.sum(alive & rows))
+    assert active > 2 * neighbours.SEARCH_CHUNK * neighbours.WAVE_CHUNKS
+    lists = []
+    for row_room in (0, 4, neighbours.FIRST_ROW_ROOM, 10_000):
+        for size in (0, 3_000, 10**7):
+            lists.append(
+                neighbours.search_in_waves(
+                    position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
+                    row_room,
+                )
+            )  # fmt: skip
+    start, index, distance = lists[0]
+    total = int(start[-1])
+    assert total > 3_000 and np.min(np.diff(start)[alive & rows]) >= 0
+    widths = np.diff(start)
+    assert widths[:500][(alive & rows)[:500]].mean() > 2 * widths[500:][(alive & rows)[500:]].mean()
+    for other_start, other_index, other_distance in lists[1:]:
+        assert np.array_equal(other_start, start)
+        assert np.array_equal(other_index[:total], index[:total])
+        assert np.array_equal(other_distance[:total], distance[:total])
+    # and it is the pairs closer than the radius (in the order of the cells around each row)
+    reference = neighbours.neighbour_list(position, alive, rows, radius)
+    assert np.array_equal(reference[0], start)
+    sample = rng.choice(np.flatnonzero(alive & rows), 50, replace=False)
+    for i in sample:
+        r = np.sqrt(((position - position[i]) ** 2).sum(axis=1))
+        expected = np.flatnonzero(alive & (r < radius))
+        expected = expected[expected != i]
+        assert sorted(index[start[i] : start[i + 1]].tolist()) == expected.tolist()
+        assert np.array_equal(distance[start[i] : start[i + 1]], r[index[start[i] : start[i + 1]]])
+
+
 def blob(dim: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A free, jittered fluid block (no walls) with random velocities."""
     l0 = 0.01

@@ -1,8 +1,8 @@
 """Neighbour search of the MPS fluid: the cell list, Verlet-list filtering and their helpers.
 
 Positions ``(N, D)`` float64 in m (D = 2 or 3), ``alive (N,)`` bool. Every parallel loop is a
-gather: particle i reads the cells around it and writes only its own row, so the lists are
-bitwise identical whatever the number of threads.
+gather: particle i (or a fixed chunk of rows) reads the cells around it and writes only its own
+rows, so the lists are bitwise identical whatever the number of threads.
 """
 
 from __future__ import annotations
@@ -127,7 +127,8 @@ def _scan_cells(
 ) -> int:
     """Particle i's neighbours closer than sqrt(radius2) in the cells around its own, in
     cell order then member order. With ``slot`` < 0 they are only counted; otherwise they are
-    written from ``slot`` on into ``index`` and ``distance``. Returns how many there are.
+    written from ``slot`` on into ``index`` and ``distance``, as far as those reach. Returns
+    how many there are (all of them, also those that did not fit).
 
     The loops are written out for three axes with the coordinates in separate arrays: the
     compiler then keeps the candidate loop free of inner loops (about twice as fast as a loop
@@ -167,15 +168,124 @@ def _scan_cells(
                     if r2 < radius2:
                         j = member[m]
                         if j != i:
-                            index[slot + found] = j
-                            distance[slot + found] = math.sqrt(r2)
+                            if slot + found < index.shape[0]:
+                                index[slot + found] = j
+                                distance[slot + found] = math.sqrt(r2)
                             found += 1
     if slot < 0:
         found -= 1  # i itself, at distance 0
     return found
 
 
+# The one-pass search (:func:`search_neighbours`) fills the rows in chunks of SEARCH_CHUNK rows,
+# each chunk's rows one after another in its own part of a scratch buffer, and WAVE_CHUNKS chunks
+# at a time (a wave): the wave's rows are counted as they are filled, then copied to their place
+# in the list. A chunk that outgrows its part is searched again straight into the list.
+SEARCH_CHUNK = 32
+WAVE_CHUNKS = 64
+# Entries a row the first wave's scratch holds; later waves' hold the widest chunk's mean so far,
+# a quarter more (the list is the same whatever these are: they only decide which path it takes).
+FIRST_ROW_ROOM = 64
+
+
+@njit(cache=True)
+def _keep_growing(buffer: np.ndarray, size: int, keep: int, estimate: int) -> np.ndarray:
+    """``buffer`` if it holds ``size`` entries, else a new one of ``max(size, estimate)`` and a
+    quarter more with ``buffer``'s first ``keep`` entries."""
+    if buffer.shape[0] >= size:
+        return buffer
+    grown = np.empty(max(size, estimate) * 5 // 4, dtype=buffer.dtype)
+    grown[:keep] = buffer[:keep]
+    return grown
+
+
 @njit(cache=True, parallel=True)
+def search_in_waves(
+    position: np.ndarray,
+    alive: np.ndarray,
+    rows: np.ndarray,
+    radius: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+    row_room: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`search_neighbours` with the first wave's scratch ``row_room`` entries a row (a
+    test's handle on the paths the search can take; the list is the same whatever it is)."""
+    n = position.shape[0]
+    cell, shape, stride, start, member, member_position, coordinates = _grid(
+        position, alive, radius
+    )
+    radius2 = radius * radius
+    # The rows to fill, compacted: the parallel loops split their iterations evenly between
+    # the threads, and rows are not spread evenly over the particles (water first, then the
+    # tank's walls mixed with its row-less dummies).
+    active = np.flatnonzero(alive & rows)
+    n_active = active.shape[0]
+    found = np.zeros(n_active, dtype=np.int64)  # each active row's length
+    offset = np.zeros(n_active + 1, dtype=np.int64)  # where it starts in the list
+    chunks = (n_active + SEARCH_CHUNK - 1) // SEARCH_CHUNK
+    used = np.zeros(WAVE_CHUNKS, dtype=np.int64)  # entries of a chunk's rows, -1 if outgrown
+    room_row = max(row_room, 1)
+    scratch_index = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row, dtype=np.int32)
+    scratch_distance = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row)
+    for first_chunk in range(0, chunks, WAVE_CHUNKS):
+        wave = min(WAVE_CHUNKS, chunks - first_chunk)
+        part = SEARCH_CHUNK * room_row  # a chunk's part of the scratch
+        for w in prange(wave):  # fill each chunk's rows into its part, counting them
+            base = w * part
+            chunk_index = scratch_index[base : base + part]
+            chunk_distance = scratch_distance[base : base + part]
+            first = (first_chunk + w) * SEARCH_CHUNK
+            filled = 0
+            for a in range(first, min(first + SEARCH_CHUNK, n_active)):
+                found[a] = _scan_cells(
+                    active[a], cell, shape, stride, start, member, member_position,
+                    coordinates, radius2, chunk_index, chunk_distance, filled,
+                )  # fmt: skip
+                filled += found[a]
+            used[w] = filled if filled <= part else -1
+        first_row = first_chunk * SEARCH_CHUNK
+        last_row = min((first_chunk + wave) * SEARCH_CHUNK, n_active)
+        widest = 0
+        for a in range(first_row, last_row):
+            offset[a + 1] = offset[a] + found[a]
+        for w in range(wave):
+            first = (first_chunk + w) * SEARCH_CHUNK
+            last = min(first + SEARCH_CHUNK, n_active)
+            widest = max(widest, offset[last] - offset[first])
+        size = int(offset[last_row])
+        estimate = size * n_active // max(last_row, 1) + 1  # the whole list, by the rows so far
+        index = _keep_growing(index, size, int(offset[first_row]), estimate)
+        distance = _keep_growing(distance, size, int(offset[first_row]), estimate)
+        for w in prange(wave):  # each chunk's rows to their place in the list
+            first = (first_chunk + w) * SEARCH_CHUNK
+            last = min(first + SEARCH_CHUNK, n_active)
+            target = offset[first]
+            if used[w] >= 0:
+                base = w * part
+                for t in range(used[w]):
+                    index[target + t] = scratch_index[base + t]
+                    distance[target + t] = scratch_distance[base + t]
+            else:  # outgrown: the chunk's rows searched again, straight into the list
+                for a in range(first, last):
+                    _scan_cells(
+                        active[a], cell, shape, stride, start, member, member_position,
+                        coordinates, radius2, index, distance, offset[a],
+                    )  # fmt: skip
+        wider = (widest * 5 // 4 + SEARCH_CHUNK - 1) // SEARCH_CHUNK
+        if wider > room_row:
+            room_row = wider
+            scratch_index = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row, dtype=np.int32)
+            scratch_distance = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row)
+    row_count = np.zeros(n + 1, dtype=np.int64)
+    for a in range(n_active):
+        row_count[active[a] + 1] = found[a]
+    for i in range(n):
+        row_count[i + 1] += row_count[i]
+    return row_count, index, distance
+
+
+@njit(cache=True)
 def search_neighbours(
     position: np.ndarray,
     alive: np.ndarray,
@@ -189,42 +299,15 @@ def search_neighbours(
     neighbours of others).
 
     Cells of side ``radius / CELLS_PER_RADIUS`` (:func:`_grid`); particle i scans the cells
-    within ``CELLS_PER_RADIUS`` of its own along each axis, once to count and once to fill.
-    Returns the arrays of :class:`Neighbours` ``(start, indices, distance)``;
-    within a row the order is fixed (cell order, then particle index). ``indices`` and
-    ``distance`` are the buffers ``index`` ((K,) int32) and ``distance`` ((K,) float64) when
-    they hold the list, else new ones (:func:`room`), and run past the list's end ``start[N]``.
+    within ``CELLS_PER_RADIUS`` of its own along each axis, once: the rows are filled and
+    counted in chunks (:data:`SEARCH_CHUNK`), a wave of chunks at a time, then copied to their
+    place (a count pass before the fill took half the search, docs/performance.md). Returns the
+    arrays of :class:`Neighbours` ``(start, indices, distance)``; within a row the order is fixed
+    (cell order, then particle index). ``indices`` and ``distance`` are the buffers ``index``
+    ((K,) int32) and ``distance`` ((K,) float64) when they hold the list, else new ones, and run
+    past the list's end ``start[N]``.
     """
-    n = position.shape[0]
-    cell, shape, stride, start, member, member_position, coordinates = _grid(
-        position, alive, radius
-    )
-    radius2 = radius * radius
-    # The rows to fill, compacted: the parallel loops split their iterations evenly between
-    # the threads, and rows are not spread evenly over the particles (water first, then the
-    # tank's walls mixed with its row-less dummies).
-    active = np.flatnonzero(alive & rows)
-    n_active = active.shape[0]
-    row_count = np.zeros(n + 1, dtype=np.int64)
-    none_i = np.empty(0, dtype=np.int32)
-    none_f = np.empty(0)
-    for a in prange(n_active):  # first pass: count each row
-        i = active[a]
-        row_count[i + 1] = _scan_cells(
-            i, cell, shape, stride, start, member, member_position, coordinates, radius2,
-            none_i, none_f, -1,
-        )  # fmt: skip
-    for i in range(n):
-        row_count[i + 1] += row_count[i]
-    index = room(index, int(row_count[n]))
-    distance = room(distance, int(row_count[n]))
-    for a in prange(n_active):  # second pass: fill each row
-        i = active[a]
-        _scan_cells(
-            i, cell, shape, stride, start, member, member_position, coordinates, radius2,
-            index, distance, row_count[i],
-        )  # fmt: skip
-    return row_count, index, distance
+    return search_in_waves(position, alive, rows, radius, index, distance, FIRST_ROW_ROOM)
 
 
 @njit(cache=True)
