@@ -99,9 +99,10 @@ def test_the_kernels_constants_are_their_sources() -> None:
     """gpu_kernels writes the constants its kernels read (so that an edit of one changes that
     file and Numba compiles the cached kernels again): they are the values the rest of the
     package uses."""
-    from jellysim.fluid import geometry, gpu_kernels, kernels
+    from jellysim.fluid import geometry, gpu_kernels, kernels, neighbours
 
     assert gpu_kernels.BLOCK == gpu.BLOCK
+    assert gpu_kernels.CELLS_PER_RADIUS == neighbours.CELLS_PER_RADIUS
     team = gpu.COARSE_TEAM_SIMULATED  # a power of two dividing a block: its teams' trees
     assert gpu.BLOCK % team == 0 and team & (team - 1) == 0 and team > 1
     kinds = (gpu_kernels.FLUID, gpu_kernels.WALL, gpu_kernels.DUMMY)

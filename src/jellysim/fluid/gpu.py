@@ -48,6 +48,7 @@ import scipy.linalg.lapack
 
 from jellysim.fluid.geometry import DUMMY
 from jellysim.fluid.mps import (
+    MATRIX_PRECISIONS,
     MPSParameters,
     PhaseTimer,
     StepStats,
@@ -55,6 +56,7 @@ from jellysim.fluid.mps import (
     solver_setup,
     step_limits,
 )
+from jellysim.fluid.neighbours import CELLS_PER_RADIUS
 from jellysim.fluid.solvers import FluidDiverged
 
 log = logging.getLogger(__name__)
@@ -95,8 +97,9 @@ BLOCK = 128
 WIDTH_FACTOR = 1.4
 
 # The two-level preconditioner (``fluid.solver = "deflated"`` on the GPU): aggregates are blocks
-# of k x k (x k) search cells, k the nearest to ``coarse_cell`` l0 and grown until there are at
-# most one per COARSE_PARTICLES particles and COARSE_LARGEST in all (E^-1 is dense on the GPU,
+# of k x k (x k) search cells, k CELLS_PER_RADIUS times the whole search radii nearest to
+# ``coarse_cell`` l0, grown by CELLS_PER_RADIUS while there are more than one per
+# COARSE_PARTICLES particles and COARSE_LARGEST in all (E^-1 is dense on the GPU,
 # factored on the host: more aggregates save iterations and cost a larger factorisation). E^-1
 # is made anew at each frame's first solve (so that a resumed run solves as the run), when a
 # solve takes more than COARSE_STALE times the iterations of the first solve with it (plus two),
@@ -191,13 +194,14 @@ class GPUSolver:
         self.searches = 0
         self.domain_min = setup.domain_min
         self.domain_max = setup.domain_max
-        # The cell grid, cells as wide as the search radius, over the particles' initial box
-        # and a cell around it: a particle beyond it counts in the nearest cell on its edge
-        # (clamping keeps two particles within the radius in neighbouring cells, so no pair
-        # is missed; the domain around the tank, where splashes die, needs no cells of its own).
-        cell = self.search_radius
-        low = positions.min(axis=0) - cell
-        high = positions.max(axis=0) + cell
+        # The cell grid, cells radius / CELLS_PER_RADIUS wide (the CPU search's), over the
+        # particles' initial box and a search radius around it: a particle beyond it counts in
+        # the nearest cell on its edge (clamping keeps two particles within the radius within
+        # CELLS_PER_RADIUS cells of each other, so no pair is missed; the domain around the
+        # tank, where splashes die, needs no cells of its own).
+        self._cell_size = cell = self.search_radius / CELLS_PER_RADIUS
+        low = positions.min(axis=0) - self.search_radius
+        high = positions.max(axis=0) + self.search_radius
         shape = np.ones(3, dtype=np.int64)
         shape[:dim] = np.floor((high - low) / cell).astype(np.int64) + 1
         self._shape = shape
@@ -234,6 +238,7 @@ class GPUSolver:
         self._tile_sums = da(_grid(self._cells), dtype=np.int32)
         self._tile_offsets = da(_grid(self._cells), dtype=np.int32)
         self._member = da(n, dtype=np.int64)
+        self._member_position = da((dim, n))  # the members' coordinates, in cell order
         self._within = da(n, dtype=np.int32)
         self._unknown = da(n, dtype=np.int8)
         self._rows_all = d((self.kind != DUMMY).astype(np.bool_))
@@ -256,7 +261,10 @@ class GPUSolver:
         self._host: dict[str, np.ndarray] = {}
         # the coarse space (fluid.solver = "deflated"): none until the first solve makes it
         self.two_level = p.solver == "deflated"
-        self._coarse_base = max(1, round(p.coarse_cell * l0 / self.search_radius))
+        # aggregates of whole radius-wide cells (blocks of CELLS_PER_RADIUS^D search cells),
+        # as before the search's cells were halved: the same aggregates, the same iterations
+        whole = max(1, round(p.coarse_cell * l0 / self.search_radius))
+        self._coarse_base = CELLS_PER_RADIUS * whole
         self._coarse_k = self._coarse_base
         self._coarse_age = COARSE_REFRESH  # steps since E^-1 was made: make it at once
         self._coarse_baseline = 0  # the iterations of the first solve with this E^-1
@@ -341,7 +349,7 @@ class GPUSolver:
         self._index = da((width, self.n), dtype=np.int32)
         self._distance = da((width, self.n))
         # the PPE's off-diagonal entries, in single precision with fluid.matrix_precision
-        real = np.float32 if self.params.matrix_precision == "single" else np.float64
+        real = MATRIX_PRECISIONS[self.params.matrix_precision]
         self._coefficient = da((width, self.n), dtype=real)
         self._list_count = da(self.n, dtype=np.int32)
 
@@ -353,10 +361,11 @@ class GPUSolver:
         while True:
             self._launch(
                 "neighbour_search", max(self.n, self._cells), position, self._d_alive,
-                self._d_lower, 1.0 / self.search_radius, self._d_shape, rows, every,
+                self._d_lower, 1.0 / self._cell_size, self._d_shape, rows, every,
                 self._d_kind, self.search_radius, self._cell, self._count, self._cursor,
-                self._tile_sums, self._tile_offsets, self._start, self._member, self._index,
-                self._distance, self._list_count, self._most,
+                self._tile_sums, self._tile_offsets, self._start, self._member,
+                self._member_position, self._index, self._distance, self._list_count,
+                self._most,
             )  # fmt: skip
             most = int(self._most.copy_to_host()[0])
             if most <= self.width:
@@ -541,7 +550,7 @@ class GPUSolver:
             blocks = np.flatnonzero(flags.copy_to_host()).astype(np.int64)
             if len(blocks) <= min(COARSE_LARGEST, max(1, self.n // COARSE_PARTICLES)):
                 break
-            self._coarse_k += 1
+            self._coarse_k += CELLS_PER_RADIUS
         self._coarse_age = 0
         m = len(blocks)
         if m == 0:

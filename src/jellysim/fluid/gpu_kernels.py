@@ -15,6 +15,7 @@ from numba import cuda, float32, float64, int32
 # so a value imported from another module could change under a stale cache. A unit test
 # (tests/unit/test_fluid_gpu.py) holds them equal to their sources.
 BLOCK = 128  # jellysim.fluid.gpu.BLOCK: threads of a block
+CELLS_PER_RADIUS = 2  # jellysim.fluid.neighbours': search cells radius / 2 wide
 FLUID, WALL, DUMMY = 0, 1, 2  # jellysim.fluid.geometry's particle kinds
 CORRECTION_MIN_DETERMINANT = 0.3  # jellysim.fluid.kernels'
 # a step's counters (an int64 array): the free-surface particles of the step, the dead so far
@@ -142,13 +143,25 @@ def sort_cell(c, start, member):
 
 
 @cuda.jit(device=True)
+def sorted_positions(m, start, member, position, member_position):
+    """Member slot m's coordinates, copied in cell order (``member_position`` (D, N))."""
+    if m < start[start.shape[0] - 1]:
+        j = member[m]
+        for k in range(position.shape[1]):
+            member_position[k, m] = position[j, k]
+
+
+@cuda.jit(device=True)
 def search(
-    i, position, rows, every, kind, cell, start, member, shape, radius, index, distance, count,
-    most,
+    i, position, rows, every, kind, cell, start, member, member_position, shape, radius,
+    index, distance, count, most,
 ):  # fmt: skip
     """Row i (``rows[i]``, or every live fluid and wall particle where ``every[-1]`` is 1):
-    the live particles within ``radius`` of particle i but itself, over the 3^D cells
-    around its own in order, members in particle order."""
+    the live particles within ``radius`` of particle i but itself. The cells are radius /
+    CELLS_PER_RADIUS wide; row i scans those within CELLS_PER_RADIUS of its own along each
+    axis, each (y, z) row of them one run of members along x, in cell order then particle
+    order, reading the members' coordinates copied in that order (``member_position``) and
+    their indices only for those within the radius."""
     found = 0
     width = index.shape[0]
     c = cell[i]
@@ -164,21 +177,26 @@ def search(
         zi = 0.0
         if dim == 3:
             zi = position[i, 2]
-        for z in range(max(cz - 1, 0), min(cz + 2, shape[2])):
-            for y in range(max(cy - 1, 0), min(cy + 2, shape[1])):
-                for x in range(max(cx - 1, 0), min(cx + 2, shape[0])):
-                    k = x + shape[0] * (y + shape[1] * z)
-                    for m in range(start[k], start[k + 1]):
+        x0 = max(cx - CELLS_PER_RADIUS, 0)
+        x1 = min(cx + CELLS_PER_RADIUS, shape[0] - 1)
+        z0 = 0
+        z1 = 0
+        if dim == 3:
+            z0 = max(cz - CELLS_PER_RADIUS, 0)
+            z1 = min(cz + CELLS_PER_RADIUS, shape[2] - 1)
+        for z in range(z0, z1 + 1):
+            for y in range(max(cy - CELLS_PER_RADIUS, 0), min(cy + CELLS_PER_RADIUS + 1, shape[1])):
+                run = shape[0] * (y + shape[1] * z)
+                for m in range(start[run + x0], start[run + x1 + 1]):
+                    dx = member_position[0, m] - xi
+                    dy = member_position[1, m] - yi
+                    r2 = dx * dx + dy * dy
+                    if dim == 3:
+                        dz = member_position[2, m] - zi
+                        r2 += dz * dz
+                    if r2 < r2max:
                         j = member[m]
-                        if j == i:
-                            continue
-                        dx = position[j, 0] - xi
-                        dy = position[j, 1] - yi
-                        r2 = dx * dx + dy * dy
-                        if dim == 3:
-                            dz = position[j, 2] - zi
-                            r2 += dz * dz
-                        if r2 < r2max:
+                        if j != i:
                             if found < width:
                                 index[found, i] = j
                                 distance[found, i] = math.sqrt(r2)
@@ -191,13 +209,14 @@ def search(
 @cuda.jit(cache=True)
 def neighbour_search(
     position, alive, lower, inverse, shape, rows, every, kind, radius, cell, count, cursor,
-    sums, offsets, start, member, index, distance, list_count, most,
+    sums, offsets, start, member, member_position, index, distance, list_count, most,
 ):  # fmt: skip
     """The neighbour lists in one cooperative launch, the grid meeting between the stages:
     each particle's cell (:func:`cell_of`); the cells' counts summed over tiles of ``BLOCK``
     cells (a tile by a block), the tiles' offsets (by one block) and each cell's start; the
-    members scattered (:func:`scatter`) and sorted in particle order within each cell; then
-    each row's search (:func:`search`). ``most[0]``: the widest row past the lists' width,
+    members scattered (:func:`scatter`) and sorted in particle order within each cell, and
+    their coordinates copied in that order (:func:`sorted_positions`); then each row's search
+    (:func:`search`). ``most[0]``: the widest row past the lists' width,
     0 when every row fits."""
     grid = cuda.cg.this_grid()
     shared = cuda.shared.array(BLOCK, dtype=int32)
@@ -238,10 +257,13 @@ def neighbour_search(
     for c in range(first, cells, stride):
         sort_cell(c, start, member)
     grid.sync()
+    for m in range(first, n, stride):
+        sorted_positions(m, start, member, position, member_position)
+    grid.sync()
     for i in range(first, n, stride):
         search(
-            i, position, rows, every, kind, cell, start, member, shape, radius, index,
-            distance, list_count, most,
+            i, position, rows, every, kind, cell, start, member, member_position, shape,
+            radius, index, distance, list_count, most,
         )  # fmt: skip
 
 
@@ -1031,6 +1053,7 @@ KERNELS = {
     "tile_offsets": tile_offsets,
     "scatter": scatter,
     "sort_cell": sort_cell,
+    "sorted_positions": sorted_positions,
     "search": search,
     "neighbour_search": neighbour_search,
     "number_density": number_density,

@@ -580,17 +580,22 @@ def _gpu_fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[
     behind = (WALL_LAYERS + DUMMY_LAYERS) * p.l0
     extent = [f.tank_width] + ([f.tank_depth] if dim == 3 else []) + [f.tank_height]
     search = p.neighbour_radius * p.l0
-    cells = math.prod(int((e + 2 * behind) / search) + 3 for e in extent)
+    # cells radius / CELLS_PER_RADIUS wide over the particles' box and a radius around it;
+    # aggregates are blocks of at least CELLS_PER_RADIUS^D of them
+    cells = math.prod(
+        int((e + 2 * behind) * CELLS_PER_RADIUS / search) + 2 * CELLS_PER_RADIUS + 1 for e in extent
+    )
+    coarse_cells = math.prod(int((e + 2 * behind) / search) + 3 for e in extent)
     # a slot's PPE coefficient in 4 bytes with fluid.matrix_precision "single"
     slot = GPU_SLOT_BYTES - (FLOAT - SINGLE if p.matrix_precision == "single" else 0)
     out = {
         "GPU: MPS particles": n * (GPU_STATE_BYTES[0] * dim * FLOAT + GPU_STATE_BYTES[1]),
         "GPU: neighbour lists": n * (width * slot + INDEX),
-        "GPU: cell grid": cells * 3 * INDEX,
+        "GPU: cell grid": cells * 3 * INDEX + n * dim * FLOAT,  # members' coordinates too
     }
     if p.solver == "deflated":  # E^-1 dense, with the aggregates' map over the cells
         m = min(COARSE_LARGEST, max(1, n // COARSE_PARTICLES))
-        out["GPU: coarse space"] = m * m * FLOAT + cells * (INDEX + FLOAT) + m * 40 * FLOAT
+        out["GPU: coarse space"] = m * m * FLOAT + coarse_cells * (INDEX + FLOAT) + m * 40 * FLOAT
     if scene.bell.model == "mass-spring":
         springs = _spring_count(scene, counts.bell)
         bell = springs * GPU_SPRING_BYTES + n * dim * FLOAT
