@@ -330,6 +330,15 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
         assert np.array_equal(distance[start[i] : start[i + 1]], r[index[start[i] : start[i + 1]]])
 
 
+def test_the_fluid_kernels_fastmath_flags_are_linalgs() -> None:
+    """kernels.py and deflation.py write linalg's fastmath flags out (a cached kernel is
+    compiled again only when its own file changes): the copies are the same, contraction
+    alone (no reassociation: sums in the written order, docs/decisions.md)."""
+    from jellysim.fluid import deflation, kernels, linalg
+
+    assert kernels.FAST == deflation.FAST == linalg.FAST == {"contract"}
+
+
 def blob(dim: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A free, jittered fluid block (no walls) with random velocities."""
     l0 = 0.01
