@@ -393,6 +393,49 @@ def test_neighbour_lists_match_the_cell_search_and_grow() -> None:
             assert r == pytest.approx(expected[j], rel=1e-15)
 
 
+def test_the_3d_search_finds_every_pair_also_beyond_the_cell_grid() -> None:
+    """In 3-D, with particles moved after the solver was built past its cell grid (the
+    initial box and a search radius around it) above, beside and below it, where they count
+    in the nearest edge cell: every row holds the CPU cell search's neighbours at the CPU's
+    distances (the CPU's grid is the live particles' box, so it clamps nothing)."""
+    from jellysim.fluid.neighbours import search_neighbours
+
+    positions, kinds = _particles(3, "fcc")
+    params = MPSParameters(dim=3, l0=L0, lattice="fcc")
+    device = gpu.GPUSolver(params, positions, kinds)
+    radius = device.search_radius
+    fluid = np.flatnonzero(kinds == FLUID)
+    moved = positions.copy()
+    top, side, low = positions.max(axis=0)[2], positions.max(axis=0)[0], positions.min(axis=0)[2]
+    # a pair 3 radii above the grid's top, 0.6 radius apart; one particle 2.5 radii past its
+    # side; a pair 1.5 radii below its floor, 0.9 radius apart
+    moved[fluid[0]] = [0.01, 0.01, top + 4.0 * radius]
+    moved[fluid[1]] = moved[fluid[0]] + [0.6 * radius, 0.0, 0.0]
+    moved[fluid[2]] = [side + 3.5 * radius, 0.02, 0.02]
+    moved[fluid[3]] = [0.015, 0.02, low - 2.5 * radius]
+    moved[fluid[4]] = moved[fluid[3]] + [0.0, 0.5 * radius, -0.7 * radius]
+    device._d_position.copy_to_device(moved)
+    device._search(device._d_position, device._rows_all, device._wet)
+    count = device._list_count.copy_to_host()
+    index = device._index.copy_to_host()
+    distance = device._distance.copy_to_host()
+    rows = kinds != 2  # no dummies
+    alive = np.ones(len(kinds), dtype=bool)
+    start, cpu_index, cpu_distance = search_neighbours(
+        moved, alive, rows, radius, np.empty(0, np.int32), np.empty(0)
+    )
+    assert set(index[: count[fluid[0]], fluid[0]]) == {fluid[1]}
+    assert set(index[: count[fluid[3]], fluid[3]]) == {fluid[4]}
+    assert count[fluid[2]] == 0
+    for i in np.flatnonzero(rows):
+        row = slice(start[i], start[i + 1])
+        expected = dict(zip(cpu_index[row], cpu_distance[row], strict=True))
+        got = dict(zip(index[: count[i], i], distance[: count[i], i], strict=True))
+        assert got.keys() == expected.keys(), i
+        for j, r in got.items():
+            assert r == pytest.approx(expected[j], rel=1e-15)
+
+
 def test_gpu_solver_fails_as_the_cpu_one_does() -> None:
     """A pressure solve that cannot reach its tolerance raises FluidDiverged."""
     from jellysim.fluid.solvers import FluidDiverged

@@ -284,59 +284,95 @@ def test_search_writes_into_a_buffer_that_holds_the_list_and_grows_one_that_does
         assert index.size >= total
 
 
+def _outgrown_chunks(start: np.ndarray, active: np.ndarray, row_room: int) -> list[int]:
+    """How many chunks of each wave outgrow their part of the scratch in
+    :func:`neighbours.search_in_waves` with the first wave's room ``row_room`` (its rule, from
+    the list's row lengths): the test's check that it drives the paths it names."""
+    chunk, wave = neighbours.SEARCH_CHUNK, neighbours.WAVE_CHUNKS
+    widths = np.diff(start)[active]
+    totals = np.add.reduceat(widths, np.arange(0, widths.size, chunk))
+    room, outgrown = max(row_room, 1), []
+    for first in range(0, totals.size, wave):
+        in_wave = totals[first : first + wave]
+        outgrown.append(int(np.sum(in_wave > chunk * room)))
+        room = max(room, (int(in_wave.max()) * 5 // 4 + chunk - 1) // chunk)
+    return outgrown
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: int) -> None:
     """The search fills rows a chunk at a time into scratch, a wave of chunks at a time, and
-    searches a chunk that outgrew its scratch again straight into the list: with no room (every
-    chunk outgrows), little room (some do), ample room (none do), over several waves and into
-    buffers too small, too small for all but the first wave, and large enough, the list is the
-    same to the bit."""
+    searches a chunk that outgrew its scratch again straight into the list. With no room (every
+    chunk of the first wave outgrows), little room and the default (chunks of a later wave
+    outgrow, after the list has entries), ample room (none do), into buffers too small (grown
+    in the first wave, and again in the last one, keeping the waves done), large enough for
+    the first wave alone, and large enough for all: the list is the same to the bit, and in
+    each row the order of the cells around it (increasing cell number), by index within a
+    cell, at the distances of a brute-force search."""
     rng = np.random.default_rng(17)
-    n = 7000  # about three waves of active rows
+    n = 7000  # more than three waves of active rows
     position = rng.uniform(0.0, 1.0, (n, dim)) * np.array([1.0, 0.5, 0.4][:dim])
-    position[:500] *= 0.12  # a dense corner: its chunks are wider than the others
+    position[-500:] *= 0.12  # a dense corner in the last rows: the last wave's chunks are wider
     alive = rng.random(n) > 0.05
     rows = rng.random(n) > 0.1
     radius = 0.035 if dim == 3 else 0.02
-    active = int(np.sum(alive & rows))
-    assert active > 2 * neighbours.SEARCH_CHUNK * neighbours.WAVE_CHUNKS
-    lists = []
-    for row_room in (0, 4, neighbours.FIRST_ROW_ROOM, 10_000):
-        for size in (0, 3_000, 10**7):
-            lists.append(
-                neighbours.search_in_waves(
-                    position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
-                    row_room,
-                )
-            )  # fmt: skip
-    start, index, distance = lists[0]
-    total = int(start[-1])
-    assert total > 3_000 and np.min(np.diff(start)[alive & rows]) >= 0
-    widths = np.diff(start)
-    assert widths[:500][(alive & rows)[:500]].mean() > 2 * widths[500:][(alive & rows)[500:]].mean()
-    for other_start, other_index, other_distance in lists[1:]:
-        assert np.array_equal(other_start, start)
-        assert np.array_equal(other_index[:total], index[:total])
-        assert np.array_equal(other_distance[:total], distance[:total])
-    # and it is the pairs closer than the radius (in the order of the cells around each row)
+    active = np.flatnonzero(alive & rows)
     reference = neighbours.neighbour_list(position, alive, rows, radius)
-    assert np.array_equal(reference[0], start)
-    sample = rng.choice(np.flatnonzero(alive & rows), 50, replace=False)
-    for i in sample:
+    start = reference[0]
+    total = int(start[-1])
+    first_wave = int(start[active[neighbours.SEARCH_CHUNK * neighbours.WAVE_CHUNKS]])
+    assert len(_outgrown_chunks(start, active, 0)) >= 3
+    for row_room in (0, 4, neighbours.FIRST_ROW_ROOM):
+        assert _outgrown_chunks(start, active, row_room)[-1] > 0, row_room
+    assert _outgrown_chunks(start, active, 0)[0] == neighbours.WAVE_CHUNKS
+    assert sum(_outgrown_chunks(start, active, 10_000)) == 0
+    for row_room in (0, 4, neighbours.FIRST_ROW_ROOM, 10_000):
+        for size in (0, first_wave // 2, first_wave + 10, 2 * total):
+            got = neighbours.search_in_waves(
+                position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
+                row_room,
+            )  # fmt: skip
+            assert np.array_equal(got[0], start)
+            assert np.array_equal(got[1][:total], reference[1])
+            assert np.array_equal(got[2][:total], reference[2])
+    # the order and the distances, by the grid's own rule (cells radius / CELLS_PER_RADIUS
+    # wide from the live particles' lowest corner)
+    live = position[alive]
+    lower = live.min(axis=0)
+    shape = ((live.max(axis=0) - lower) * (neighbours.CELLS_PER_RADIUS / radius)).astype(int) + 1
+    cell = np.minimum(
+        ((position - lower) * (neighbours.CELLS_PER_RADIUS / radius)).astype(int), shape - 1
+    )
+    number = np.ravel_multi_index(tuple(np.clip(cell, 0, None).T), tuple(shape), order="F")
+    for i in rng.choice(active, 60, replace=False):
         r = np.sqrt(((position - position[i]) ** 2).sum(axis=1))
-        expected = np.flatnonzero(alive & (r < radius))
-        expected = expected[expected != i]
-        assert sorted(index[start[i] : start[i + 1]].tolist()) == expected.tolist()
-        assert np.array_equal(distance[start[i] : start[i + 1]], r[index[start[i] : start[i + 1]]])
+        within = np.flatnonzero(alive & (r < radius))
+        within = within[within != i]
+        expected = within[np.lexsort((within, number[within]))]
+        row = slice(start[i], start[i + 1])
+        assert reference[1][row].tolist() == expected.tolist()
+        assert np.array_equal(reference[2][row], r[expected])
 
 
 def test_the_fluid_kernels_fastmath_flags_are_linalgs() -> None:
     """kernels.py and deflation.py write linalg's fastmath flags out (a cached kernel is
     compiled again only when its own file changes): the copies are the same, contraction
     alone (no reassociation: sums in the written order, docs/decisions.md)."""
+    from numba.core.registry import CPUDispatcher
+
     from jellysim.fluid import deflation, kernels, linalg
 
     assert kernels.FAST == deflation.FAST == linalg.FAST == {"contract"}
+    # and every compiled function of the three that asks for fastmath asks for these
+    flagged = []
+    for module in (kernels, deflation, linalg):
+        for name, value in vars(module).items():
+            if isinstance(value, CPUDispatcher) and value.__module__ == module.__name__:
+                flags = value.targetoptions.get("fastmath")
+                if flags:
+                    assert set(flags) == {"contract"}, name
+                    flagged.append(name)
+    assert {"multiply", "explicit_stage", "pressure_correction", "_smooth"} <= set(flagged)
 
 
 def blob(dim: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
