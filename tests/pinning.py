@@ -2,7 +2,8 @@
 
 The regression gates (tests/regression, ``test_loops.py``) compare runs with stored results bit
 for bit. Three things a host picks change the last bits of a run: the code Numba generates for the
-host's processor (its vector width reorders the reductions ``fastmath`` may reassociate), NumPy's
+host's processor (its instructions; since 2026-11-28 no kernel lets ``fastmath`` reassociate
+its sums, which made the vector width reorder them), NumPy's
 runtime SIMD dispatch (AVX-512 versions of its ufuncs and sorts) and OpenBLAS's kernel and thread
 count. Imported by ``conftest.py`` before NumPy, SciPy or Numba load, this module pins all of them
 to the x86-64-v3 level (AVX2 and FMA, which every x86-64 server of the last decade has), so the

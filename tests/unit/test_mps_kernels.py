@@ -354,6 +354,27 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
         assert np.array_equal(reference[2][row], r[expected])
 
 
+def test_the_fluid_kernels_fastmath_flags_are_linalgs() -> None:
+    """kernels.py and deflation.py write linalg's fastmath flags out (a cached kernel is
+    compiled again only when its own file changes): the copies are the same, contraction
+    alone (no reassociation: sums in the written order, docs/decisions.md)."""
+    from numba.core.registry import CPUDispatcher
+
+    from jellysim.fluid import deflation, kernels, linalg
+
+    assert kernels.FAST == deflation.FAST == linalg.FAST == {"contract"}
+    # and every compiled function of the three that asks for fastmath asks for these
+    flagged = []
+    for module in (kernels, deflation, linalg):
+        for name, value in vars(module).items():
+            if isinstance(value, CPUDispatcher) and value.__module__ == module.__name__:
+                flags = value.targetoptions.get("fastmath")
+                if flags:
+                    assert set(flags) == {"contract"}, name
+                    flagged.append(name)
+    assert {"multiply", "explicit_stage", "pressure_correction", "_smooth"} <= set(flagged)
+
+
 def blob(dim: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A free, jittered fluid block (no walls) with random velocities."""
     l0 = 0.01

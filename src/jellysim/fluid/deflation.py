@@ -34,13 +34,18 @@ import scipy.sparse.linalg
 from numba import njit, prange
 
 from jellysim.fluid.linalg import (
-    FAST,
     Matrix,
     diagonal_values,
     dot,
     multiply,
     preconditioned_cg,
 )
+
+# fastmath as jellysim.fluid.linalg's FAST (contraction alone), written here: Numba compiles a
+# kernel's flags into its cached machine code and compiles it again only when the kernel's own
+# file changes, so flags imported from another module could go stale (a unit test holds the
+# copies equal).
+FAST = {"contract"}
 
 
 def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[np.ndarray, int]:

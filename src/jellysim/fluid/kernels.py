@@ -21,8 +21,13 @@ import numpy as np
 from numba import njit, prange
 
 from jellysim.fluid.geometry import DUMMY, FLUID
-from jellysim.fluid.linalg import FAST
 from jellysim.fluid.neighbours import Neighbours
+
+# fastmath as jellysim.fluid.linalg's FAST (contraction alone), written here: Numba compiles a
+# kernel's flags into its cached machine code and compiles it again only when the kernel's own
+# file changes, so flags imported from another module could go stale (a unit test holds the
+# copies equal).
+FAST = {"contract"}
 
 
 class Constants(NamedTuple):
