@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from jellysim.fluid import gpu
-from jellysim.fluid.geometry import FLUID, WALL, tank, water_block
+from jellysim.fluid.geometry import DUMMY, FLUID, WALL, tank, water_block
 from jellysim.fluid.mps import MPSParameters, MPSSolver
 
 pytestmark = pytest.mark.skipif(
@@ -348,13 +348,36 @@ def test_a_two_level_run_resumes_to_the_bit(monkeypatch) -> None:
         np.testing.assert_array_equal(resumed.state_arrays()[name], value, err_msg=name)
 
 
+def _lists_match_the_cpu_search(
+    device: gpu.GPUSolver, positions: np.ndarray, kinds: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every row of the GPU's lists (all particles alive, at ``positions``) holds the CPU cell
+    search's neighbours at the CPU's distances. Returns the GPU's (count, index)."""
+    from jellysim.fluid.neighbours import search_neighbours
+
+    count = device._list_count.copy_to_host()
+    index = device._index.copy_to_host()
+    distance = device._distance.copy_to_host()
+    rows = kinds != DUMMY
+    alive = np.ones(len(kinds), dtype=bool)
+    start, cpu_index, cpu_distance = search_neighbours(
+        positions, alive, rows, device.search_radius, np.empty(0, np.int32), np.empty(0)
+    )
+    for i in range(len(kinds)):  # a dummy's row is empty on both
+        row = slice(start[i], start[i + 1])
+        expected = dict(zip(cpu_index[row], cpu_distance[row], strict=True))
+        got = dict(zip(index[: count[i], i], distance[: count[i], i], strict=True))
+        assert got.keys() == expected.keys(), i
+        for j, r in got.items():
+            assert r == pytest.approx(expected[j], rel=1e-15)
+    return count, index
+
+
 def test_neighbour_lists_match_the_cell_search_and_grow() -> None:
     """Each row of the GPU's fixed-width list holds the CPU cell search's neighbours, in
     particle order within a cell; a width too small is grown and the search repeated. A wall
     particle far from the tank widens the cell grid to several tiles of BLOCK cells, so the
     cells' starts carry from tile to tile (the fused search's tile stages)."""
-    from jellysim.fluid.neighbours import search_neighbours
-
     positions, kinds = _particles(2, "square")
     positions = np.concatenate([positions, [[1.0, 1.0]]])
     kinds = np.concatenate([kinds, [WALL]]).astype(np.int8)
@@ -372,25 +395,12 @@ def test_neighbour_lists_match_the_cell_search_and_grow() -> None:
     for c in np.flatnonzero(per_cell):
         within = member[start[c] : start[c + 1]]
         np.testing.assert_array_equal(within, np.flatnonzero(cell == c))
-    count = device._list_count.copy_to_host()
-    index = device._index.copy_to_host()
-    distance = device._distance.copy_to_host()
-    rows = kinds != 2  # no dummies
-    alive = np.ones(len(kinds), dtype=bool)
-    start, cpu_index, cpu_distance = search_neighbours(
-        positions, alive, rows, device.search_radius, np.empty(0, np.int32), np.empty(0)
-    )
+    count, index = _lists_match_the_cpu_search(device, positions, kinds)
     cell = device._cell.copy_to_host()
     for i in range(len(kinds)):
         # in the order of the cells around i (increasing cell number), by index within a cell
         order = [(cell[j], j) for j in index[: count[i], i]]
         assert order == sorted(order), i
-        row = slice(start[i], start[i + 1])
-        expected = dict(zip(cpu_index[row], cpu_distance[row], strict=True))
-        got = dict(zip(index[: count[i], i], distance[: count[i], i], strict=True))
-        assert got.keys() == expected.keys(), i
-        for j, r in got.items():
-            assert r == pytest.approx(expected[j], rel=1e-15)
 
 
 def test_the_3d_search_finds_every_pair_also_beyond_the_cell_grid() -> None:
@@ -398,8 +408,6 @@ def test_the_3d_search_finds_every_pair_also_beyond_the_cell_grid() -> None:
     initial box and a search radius around it) above, beside and below it, where they count
     in the nearest edge cell: every row holds the CPU cell search's neighbours at the CPU's
     distances (the CPU's grid is the live particles' box, so it clamps nothing)."""
-    from jellysim.fluid.neighbours import search_neighbours
-
     positions, kinds = _particles(3, "fcc")
     params = MPSParameters(dim=3, l0=L0, lattice="fcc")
     device = gpu.GPUSolver(params, positions, kinds)
@@ -416,24 +424,10 @@ def test_the_3d_search_finds_every_pair_also_beyond_the_cell_grid() -> None:
     moved[fluid[4]] = moved[fluid[3]] + [0.0, 0.5 * radius, -0.7 * radius]
     device._d_position.copy_to_device(moved)
     device._search(device._d_position, device._rows_all, device._wet)
-    count = device._list_count.copy_to_host()
-    index = device._index.copy_to_host()
-    distance = device._distance.copy_to_host()
-    rows = kinds != 2  # no dummies
-    alive = np.ones(len(kinds), dtype=bool)
-    start, cpu_index, cpu_distance = search_neighbours(
-        moved, alive, rows, radius, np.empty(0, np.int32), np.empty(0)
-    )
+    count, index = _lists_match_the_cpu_search(device, moved, kinds)
     assert set(index[: count[fluid[0]], fluid[0]]) == {fluid[1]}
     assert set(index[: count[fluid[3]], fluid[3]]) == {fluid[4]}
     assert count[fluid[2]] == 0
-    for i in np.flatnonzero(rows):
-        row = slice(start[i], start[i + 1])
-        expected = dict(zip(cpu_index[row], cpu_distance[row], strict=True))
-        got = dict(zip(index[: count[i], i], distance[: count[i], i], strict=True))
-        assert got.keys() == expected.keys(), i
-        for j, r in got.items():
-            assert r == pytest.approx(expected[j], rel=1e-15)
 
 
 def test_gpu_solver_fails_as_the_cpu_one_does() -> None:
