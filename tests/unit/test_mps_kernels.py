@@ -326,15 +326,26 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
         assert _outgrown_chunks(start, active, row_room)[-1] > 0, row_room
     assert _outgrown_chunks(start, active, 0)[0] == neighbours.WAVE_CHUNKS
     assert sum(_outgrown_chunks(start, active, 10_000)) == 0
+    # the list cut to the near radius as the rows are copied: near_neighbours' cut
+    near_radius = 0.6 * radius
+    near = neighbours.near_neighbours(
+        neighbours.Neighbours(*reference, radius), near_radius, np.empty(0, np.int32),
+        np.empty(0),
+    )  # fmt: skip
+    near_total = int(near[0][-1])
+    assert 0 < near_total < total
     for row_room in (0, 4, neighbours.FIRST_ROW_ROOM, 10_000):
         for size in (0, first_wave // 2, first_wave + 10, 2 * total):
             got = neighbours.search_in_waves(
                 position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
-                row_room,
+                row_room, near_radius, np.full(size // 3, -1, np.int32), np.zeros(size // 3),
             )  # fmt: skip
             assert np.array_equal(got[0], start)
             assert np.array_equal(got[1][:total], reference[1])
             assert np.array_equal(got[2][:total], reference[2])
+            assert np.array_equal(got[3], near[0])
+            assert np.array_equal(got[4][:near_total], near[1][:near_total])
+            assert np.array_equal(got[5][:near_total], near[2][:near_total])
     # the order and the distances, by the grid's own rule (cells radius / CELLS_PER_RADIUS
     # wide from the live particles' lowest corner)
     live = position[alive]

@@ -355,6 +355,7 @@ def pressure_correction(
     out_velocity: np.ndarray,
     corrected: bool = False,
     surface: np.ndarray | None = None,
+    wide: Neighbours | None = None,
 ) -> None:
     """Pressure gradient with the minimum neighbour pressure, Eq. (F10), and the correction of
     fluid particles, Eq. (F13):
@@ -373,7 +374,9 @@ def pressure_correction(
     fluid and wall neighbours within r_e,grad, p_max,i the largest pressure among its fluid
     neighbours there) with its component along the surface normal removed; the normal is the
     direction away from the centroid of the fluid and wall neighbours within the Laplacian
-    radius, ``-sum_j (r_j - r_i) w(r, r_e,lap) / r``. Other kinds are copied unchanged.
+    radius, ``-sum_j (r_j - r_i) w(r, r_e,lap) / r``, taken over ``wide`` (a list that reaches
+    that radius) where ``neighbours`` holds only the entries within r_e,grad
+    (:meth:`~jellysim.fluid.mps.MPSSolver.near`). Other kinds are copied unchanged.
     """
     n, dim = position.shape
     re = constants.re_gradient
@@ -417,7 +420,10 @@ def pressure_correction(
             moments *= dim / constants.n0_gradient
             _solve_small(moments, gradient)
         if surface is not None and surface[i]:
-            _surface_repulsion(i, position, pressure, kind, neighbours, constants, gradient)
+            if wide is None:
+                _surface_repulsion(i, position, pressure, kind, neighbours, constants, gradient)
+            else:
+                _surface_repulsion(i, position, pressure, kind, wide, constants, gradient)
         for k in range(dim):
             du = coefficient * gradient[k]
             out_velocity[i, k] += du

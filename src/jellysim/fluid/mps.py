@@ -39,7 +39,9 @@ from jellysim.fluid.neighbours import (
     filter_neighbours,
     largest_displacement,
     listed,
+    near_neighbours,
     search_neighbours,
+    search_with_near,
 )
 from jellysim.fluid.poisson import assemble_poisson, number_unknowns
 from jellysim.fluid.probes import weighted_sums
@@ -63,6 +65,11 @@ SURFACE_THRESHOLD = {"square": 0.97, "hexagonal": 0.93, "fcc": 0.93}
 # that IC(0) and its triangular solves run on two threads (number_unknowns); smaller
 # ones keep one block: they are fast anyway, and the ordering can cost an iteration.
 TWO_BLOCK_ROWS = 16384
+
+# The collisions read the list at the near radius when the collision distance lies this many l0
+# inside it: the list is drawn at r^k, the collisions tested at r*, and a particle moves far less
+# than l0 in the explicit stage (the Courant number keeps it to a fraction of l0).
+COLLISION_MARGIN = 1.0
 
 
 @dataclass(frozen=True)
@@ -312,7 +319,8 @@ class PoissonSystem(NamedTuple):
     """``A p = b`` over the unknown particles (``unknown`` (N,) bool): A in 1/m2, b (n,) Pa/m2,
     row r standing for particle ``particles[r]`` ((n,) int64; rows are in the two-block order
     of :class:`Matrix`); ``surface`` the number of free-surface particles;
-    ``neighbours`` the list at the positions it was built on."""
+    ``neighbours`` the list at the positions it was built on, ``near`` its entries within
+    :attr:`MPSSolver.near_radius`."""
 
     matrix: Matrix
     rhs: np.ndarray
@@ -320,6 +328,7 @@ class PoissonSystem(NamedTuple):
     particles: np.ndarray
     surface: int
     neighbours: Neighbours
+    near: Neighbours  # its entries within the near radius (MPSSolver.near_radius)
 
 
 @dataclass
@@ -426,6 +435,9 @@ class MPSSolver:
         self.reference = setup.reference
         self.constants = setup.constants
         self.search_radius = setup.search_radius
+        # The number-density and gradient radius (m): the kernels of those radii read the lists
+        # cut to it (fluid.neighbours.near_neighbours), the same sums bit for bit.
+        self.near_radius = max(self.constants.re_number_density, self.constants.re_gradient)
         n = setup.positions.shape[0]
         self.position = setup.positions.copy()
         self.velocity = np.zeros((n, dim))
@@ -451,10 +463,11 @@ class MPSSolver:
         self._reference_alive = np.zeros(n, dtype=np.bool_)
         self.searches = 0  # cell searches so far (neighbour lists built from scratch)
         # Buffers kept from step to step for the large arrays (fluid.neighbours.room): the lists
-        # at r^k and r*, the Verlet list, and the PPE matrix (two orders, integer and real each).
+        # at r^k and r*, the Verlet list, the near list (r^k's until the collisions are done,
+        # then r*'s), and the PPE matrix (two orders, integer and real each).
         self._buffers: dict[str, list[np.ndarray]] = {
             name: [np.empty(0, dtype=np.int32), np.empty(0)]
-            for name in ("start", "star", "candidates")
+            for name in ("start", "star", "candidates", "near")
         }
         real = MATRIX_PRECISIONS[params.matrix_precision]  # the off-diagonal entries
         self._matrix_buffers: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
@@ -496,11 +509,11 @@ class MPSSolver:
         timer = PhaseTimer(stats.seconds)
         with timer("neighbours"):
             # Neighbours at r^k, and n^k for the mixed source [Tanaka & Masunaga 2010], Eq. (F2)
-            start = self._start_neighbours()
+            start, near = self._start_neighbours()
         with timer("explicit"):
             # Explicit stage: viscosity, gravity, external force, Eq. (F5); collisions, Eq. (F6)
             self._explicit_stage(dt, start, external_force)
-            self._collide(dt, start)
+            self._collide(dt, start, near)
         with timer("neighbours"):
             # Rows at r*: the fluid and the walls it reaches within the step
             wet = self._wet(start)
@@ -527,20 +540,21 @@ class MPSSolver:
             )  # fmt: skip
         return stats
 
-    def _start_neighbours(self) -> Neighbours:
+    def _start_neighbours(self) -> tuple[Neighbours, Neighbours]:
         """The neighbour list at r^k (the "start" buffers), with rows for the particles the
-        explicit stage moves and, for the mixed source, the walls, whose n^k enters the PPE; for
-        the mixed source also n^k, Eq. (F2), into ``_start_number_density``."""
+        explicit stage moves and, for the mixed source, the walls, whose n^k enters the PPE, and
+        its entries within the near radius (:meth:`near`); for the mixed source also n^k, Eq.
+        (F2), into ``_start_number_density``."""
         p = self.params
         c = self.constants
         moving = self.kind == FLUID if p.source == "standard" else self.kind != DUMMY
-        start = self.neighbours(moving, "start")
+        start, near = self.neighbours_and_near(moving, "start", "near")
         if p.source == "mixed":
             kernels.number_density(
-                start, self.alive, c.re_number_density, self._start_number_density,
+                near, self.alive, c.re_number_density, self._start_number_density,
                 self._neighbour_count,
             )  # fmt: skip
-        return start
+        return start, near
 
     def _explicit_stage(
         self, dt: float, start: Neighbours, external_force: np.ndarray | None
@@ -557,13 +571,16 @@ class MPSSolver:
             self._acceleration, dt, self._position, self._velocity,
         )  # fmt: skip
 
-    def _collide(self, dt: float, start: Neighbours) -> None:
+    def _collide(self, dt: float, start: Neighbours, near: Neighbours) -> None:
         """The collision model, Eq. (F6), from the scratch r*, u* into ``position`` and
         ``velocity``. The r^k list holds every pair closer than the collision distance at r* (a
-        particle moves well under l0 in the explicit stage)."""
+        particle moves well under l0 in the explicit stage); so does its near part where the
+        collision distance is at least COLLISION_MARGIN inside the near radius, and the
+        pairs, taken in the same order, are the same."""
         p = self.params
+        within = (p.collision_distance + COLLISION_MARGIN) * p.l0 <= near.radius
         kernels.collision(
-            self._position, self._velocity, self.kind, self.alive, start,
+            self._position, self._velocity, self.kind, self.alive, near if within else start,
             p.collision_distance * p.l0, p.collision_restitution, dt,
             self.position, self.velocity,
         )  # fmt: skip
@@ -606,16 +623,23 @@ class MPSSolver:
         if p.gradient == "conservative":
             kernels.conservative_pressure_correction(
                 self.position, self.velocity, self.pressure, self.kind, self.alive,
-                system.neighbours, self.constants, dt, self._position, self._velocity,
+                system.near, self.constants, dt, self._position, self._velocity,
             )  # fmt: skip
             return
         surface = (  # the fluid particles on the free surface, for Eq. (F10b)
             self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None
         )
-        kernels.pressure_correction(
+        if surface is None:
+            kernels.pressure_correction(
+                self.position, self.velocity, self.pressure, self.kind, self.alive,
+                system.near, self.constants, dt, self._position, self._velocity,
+                p.gradient == "corrected",
+            )  # fmt: skip
+            return
+        kernels.pressure_correction(  # Eq. (F10b)'s normal reaches the Laplacian radius
             self.position, self.velocity, self.pressure, self.kind, self.alive,
-            system.neighbours, self.constants, dt, self._position, self._velocity,
-            p.gradient == "corrected", surface,
+            system.near, self.constants, dt, self._position, self._velocity,
+            p.gradient == "corrected", surface, system.neighbours,
         )  # fmt: skip
 
     def neighbours(self, rows: np.ndarray, buffer: str | None = None) -> Neighbours:
@@ -659,6 +683,35 @@ class MPSSolver:
             ),  # fmt: skip
             self.search_radius,
         )
+
+    def neighbours_and_near(
+        self, rows: np.ndarray, buffer: str | None = None, near_buffer: str | None = None
+    ) -> tuple[Neighbours, Neighbours]:
+        """:meth:`neighbours` and its entries within :attr:`near_radius` (:meth:`near`), in
+        the buffers ``buffer`` and ``near_buffer`` (None: arrays of their own). A cell search
+        (``neighbour_skin`` 0) cuts the near list as it copies the rows to their place; a cut
+        from the Verlet list is cut again."""
+        if self.params.neighbour_skin > 0.0 or self.near_radius >= self.search_radius:
+            whole = self.neighbours(rows, buffer)
+            return whole, self.near(whole, near_buffer)
+        self.searches += 1
+        index, distance = self._buffer(buffer)
+        near_index, near_distance = self._buffer(near_buffer)
+        lists = search_with_near(
+            self.position, self.alive, rows, self.search_radius, index, distance,
+            self.near_radius, near_index, near_distance,
+        )  # fmt: skip
+        whole = self._keep(buffer, lists[:3], self.search_radius)
+        return whole, self._keep(near_buffer, lists[3:], self.near_radius)
+
+    def near(self, neighbours: Neighbours, buffer: str | None = None) -> Neighbours:
+        """The entries of ``neighbours`` within :attr:`near_radius`, in its order
+        (:func:`~jellysim.fluid.neighbours.near_neighbours`), in the buffers ``buffer`` like
+        :meth:`neighbours`; ``neighbours`` itself where its radius is no larger."""
+        if neighbours.radius <= self.near_radius:
+            return neighbours
+        arrays = near_neighbours(neighbours, self.near_radius, *self._buffer(buffer))
+        return self._keep(buffer, arrays, self.near_radius)
 
     def _keep(
         self, buffer: str | None, arrays: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
@@ -744,9 +797,13 @@ class MPSSolver:
         solid = self.alive & (self.kind != DUMMY)
         with timer("neighbours"):
             # Neighbours and number density n* at r*, Eq. (F2)
-            nb = self.neighbours(solid if rows is None else rows & solid, "star" if reuse else None)
+            nb, near = self.neighbours_and_near(
+                solid if rows is None else rows & solid,
+                "star" if reuse else None,
+                "near" if reuse else None,
+            )
             kernels.number_density(
-                nb, self.alive, c.re_number_density, self.number_density, self._neighbour_count
+                near, self.alive, c.re_number_density, self.number_density, self._neighbour_count
             )
         with timer("assembly"):
             # Free surface, Eq. (F7) or (F7b); the other particles are the unknowns
@@ -754,8 +811,8 @@ class MPSSolver:
             unknown = solid & ~surface
             # Matrix A, Eq. (F8), and source b, Eq. (F8)-(F9)
             matrix, particles = self._poisson_matrix(dt, nb, unknown, reuse)
-            rhs = self.poisson_source(dt, particles, nb)
-        return PoissonSystem(matrix, rhs, unknown, particles, int(surface.sum()), nb)
+            rhs = self.poisson_source(dt, particles, near)
+        return PoissonSystem(matrix, rhs, unknown, particles, int(surface.sum()), nb, near)
 
     def _free_surface(self, solid: np.ndarray, start_density: np.ndarray | None) -> np.ndarray:
         """The particles of ``solid`` ((N,) bool) on the free surface ((N,) bool) by the

@@ -124,11 +124,13 @@ def _scan_cells(
     index: np.ndarray,
     distance: np.ndarray,
     slot: int,
-) -> int:
+    near_radius: float,
+) -> tuple[int, int]:
     """Particle i's neighbours closer than sqrt(radius2) in the cells around its own, in
-    cell order then member order. With ``slot`` < 0 they are only counted; otherwise they are
-    written from ``slot`` on into ``index`` and ``distance``, as far as those reach. Returns
-    how many there are (all of them, also those that did not fit).
+    cell order then member order, written from ``slot`` on into ``index`` and ``distance``, as
+    far as those reach. Returns how many there are (all of them, also those that did not fit)
+    and how many of them are closer than ``near_radius`` (their stored distance, as
+    :func:`near_neighbours` tests it).
 
     The loops are written out for three axes with the coordinates in separate arrays: the
     compiler then keeps the candidate loop free of inner loops (about twice as fast as a loop
@@ -146,6 +148,7 @@ def _scan_cells(
     my = member_position[1]
     mz = member_position[2]
     found = 0
+    near = 0
     for qz in range(max(cz - CELLS_PER_RADIUS, 0), min(cz + CELLS_PER_RADIUS, shape[2] - 1) + 1):
         for qy in range(
             max(cy - CELLS_PER_RADIUS, 0), min(cy + CELLS_PER_RADIUS, shape[1] - 1) + 1
@@ -153,28 +156,46 @@ def _scan_cells(
             c = qy * stride[1] + qz * stride[2]
             first = start[c + first_x]
             last = start[c + last_x + 1]
-            if slot < 0:
-                for m in range(first, last):
-                    dx = mx[m] - xi
-                    dy = my[m] - yi
-                    dz = mz[m] - zi
-                    found += dx * dx + dy * dy + dz * dz < radius2
-            else:
-                for m in range(first, last):
-                    dx = mx[m] - xi
-                    dy = my[m] - yi
-                    dz = mz[m] - zi
-                    r2 = dx * dx + dy * dy + dz * dz
-                    if r2 < radius2:
-                        j = member[m]
-                        if j != i:
-                            if slot + found < index.shape[0]:
-                                index[slot + found] = j
-                                distance[slot + found] = math.sqrt(r2)
-                            found += 1
-    if slot < 0:
-        found -= 1  # i itself, at distance 0
-    return found
+            for m in range(first, last):
+                dx = mx[m] - xi
+                dy = my[m] - yi
+                dz = mz[m] - zi
+                r2 = dx * dx + dy * dy + dz * dz
+                if r2 < radius2:
+                    j = member[m]
+                    if j != i:
+                        r = math.sqrt(r2)
+                        if slot + found < index.shape[0]:
+                            index[slot + found] = j
+                            distance[slot + found] = r
+                        found += 1
+                        near += r < near_radius
+    return found, near
+
+
+@njit(cache=True)
+def _cut_row(
+    index: np.ndarray,
+    distance: np.ndarray,
+    first: int,
+    last: int,
+    radius: float,
+    near_index: np.ndarray,
+    near_distance: np.ndarray,
+    slot: int,
+    end: int,
+) -> None:
+    """The entries ``first:last`` of a list closer than ``radius`` (m), in their order, into
+    ``near_index`` and ``near_distance`` from ``slot`` to ``end`` (their count). Every entry is
+    written at the next free slot, which moves on only for a near one: no branch on the
+    distance, which the processor would mispredict wherever the particles are off their
+    lattice (the test of the slot fails only once the row's last near entry is in)."""
+    for m in range(first, last):
+        r = distance[m]
+        if slot < end:
+            near_index[slot] = index[m]
+            near_distance[slot] = r
+        slot += r < radius
 
 
 # The one-pass search (:func:`search_neighbours`) fills the rows in chunks of SEARCH_CHUNK rows,
@@ -208,9 +229,13 @@ def search_in_waves(
     index: np.ndarray,
     distance: np.ndarray,
     row_room: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`search_neighbours` with the first wave's scratch ``row_room`` entries a row (a
-    test's handle on the paths the search can take; the list is the same whatever it is)."""
+    near_radius: float,
+    near_index: np.ndarray,
+    near_distance: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`search_with_near` with the first wave's scratch ``row_room`` entries a row (a
+    test's handle on the paths the search can take; the lists are the same whatever it is).
+    With ``near_radius`` 0 the near list is empty."""
     n = position.shape[0]
     cell, shape, stride, start, member, member_position, coordinates = _grid(
         position, alive, radius
@@ -222,7 +247,9 @@ def search_in_waves(
     active = np.flatnonzero(alive & rows)
     n_active = active.shape[0]
     found = np.zeros(n_active, dtype=np.int64)  # each active row's length
+    near = np.zeros(n_active, dtype=np.int64)  # and its near entries
     offset = np.zeros(n_active + 1, dtype=np.int64)  # where it starts in the list
+    near_offset = np.zeros(n_active + 1, dtype=np.int64)  # and in the near list
     chunks = (n_active + SEARCH_CHUNK - 1) // SEARCH_CHUNK
     used = np.zeros(WAVE_CHUNKS, dtype=np.int64)  # entries of a chunk's rows, -1 if outgrown
     room_row = max(row_room, 1)
@@ -238,9 +265,9 @@ def search_in_waves(
             first = (first_chunk + w) * SEARCH_CHUNK
             filled = 0
             for a in range(first, min(first + SEARCH_CHUNK, n_active)):
-                found[a] = _scan_cells(
+                found[a], near[a] = _scan_cells(
                     active[a], cell, shape, stride, start, member, member_position,
-                    coordinates, radius2, chunk_index, chunk_distance, filled,
+                    coordinates, radius2, chunk_index, chunk_distance, filled, near_radius,
                 )  # fmt: skip
                 filled += found[a]
             used[w] = filled if filled <= part else -1
@@ -249,6 +276,7 @@ def search_in_waves(
         widest = 0
         for a in range(first_row, last_row):
             offset[a + 1] = offset[a] + found[a]
+            near_offset[a + 1] = near_offset[a] + near[a]
         for w in range(wave):
             first = (first_chunk + w) * SEARCH_CHUNK
             last = min(first + SEARCH_CHUNK, n_active)
@@ -257,20 +285,31 @@ def search_in_waves(
         estimate = size * n_active // max(last_row, 1) + 1  # the whole list, by the rows so far
         index = _keep_growing(index, size, int(offset[first_row]), estimate)
         distance = _keep_growing(distance, size, int(offset[first_row]), estimate)
-        for w in prange(wave):  # each chunk's rows to their place in the list
+        size = int(near_offset[last_row])
+        estimate = size * n_active // max(last_row, 1) + 1
+        near_index = _keep_growing(near_index, size, int(near_offset[first_row]), estimate)
+        near_distance = _keep_growing(near_distance, size, int(near_offset[first_row]), estimate)
+        for w in prange(wave):  # each chunk's rows to their place in the lists
             first = (first_chunk + w) * SEARCH_CHUNK
             last = min(first + SEARCH_CHUNK, n_active)
             target = offset[first]
             if used[w] >= 0:
-                base = w * part
+                taken = w * part
                 for t in range(used[w]):
-                    index[target + t] = scratch_index[base + t]
-                    distance[target + t] = scratch_distance[base + t]
+                    index[target + t] = scratch_index[taken + t]
+                    distance[target + t] = scratch_distance[taken + t]
             else:  # outgrown: the chunk's rows searched again, straight into the list
                 for a in range(first, last):
                     _scan_cells(
                         active[a], cell, shape, stride, start, member, member_position,
-                        coordinates, radius2, index, distance, offset[a],
+                        coordinates, radius2, index, distance, offset[a], near_radius,
+                    )  # fmt: skip
+            if near_offset[last] > near_offset[first]:
+                # the near entries of each row, from the chunk's rows just copied (in cache)
+                for a in range(first, last):
+                    _cut_row(
+                        index, distance, offset[a], offset[a + 1], near_radius, near_index,
+                        near_distance, near_offset[a], near_offset[a + 1],
                     )  # fmt: skip
         wider = (widest * 5 // 4 + SEARCH_CHUNK - 1) // SEARCH_CHUNK
         if wider > room_row:
@@ -278,11 +317,14 @@ def search_in_waves(
             scratch_index = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row, dtype=np.int32)
             scratch_distance = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row)
     row_count = np.zeros(n + 1, dtype=np.int64)
+    near_count = np.zeros(n + 1, dtype=np.int64)
     for a in range(n_active):
         row_count[active[a] + 1] = found[a]
+        near_count[active[a] + 1] = near[a]
     for i in range(n):
         row_count[i + 1] += row_count[i]
-    return row_count, index, distance
+        near_count[i + 1] += near_count[i]
+    return row_count, index, distance, near_count, near_index, near_distance
 
 
 @njit(cache=True)
@@ -307,7 +349,33 @@ def search_neighbours(
     ((K,) int32) and ``distance`` ((K,) float64) when they hold the list, else new ones, and run
     past the list's end ``start[N]``.
     """
-    return search_in_waves(position, alive, rows, radius, index, distance, FIRST_ROW_ROOM)
+    start, index, distance, _, _, _ = search_in_waves(
+        position, alive, rows, radius, index, distance, FIRST_ROW_ROOM, 0.0,
+        np.empty(0, dtype=np.int32), np.empty(0),
+    )  # fmt: skip
+    return start, index, distance
+
+
+@njit(cache=True)
+def search_with_near(
+    position: np.ndarray,
+    alive: np.ndarray,
+    rows: np.ndarray,
+    radius: float,
+    index: np.ndarray,
+    distance: np.ndarray,
+    near_radius: float,
+    near_index: np.ndarray,
+    near_distance: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`search_neighbours`, and the same list cut to ``near_radius`` (m) as
+    :func:`near_neighbours` cuts it, taken as the rows are copied to their place (no second
+    pass over the list): the arrays of both, the near list's in the buffers ``near_index`` and
+    ``near_distance`` (or new ones)."""
+    return search_in_waves(
+        position, alive, rows, radius, index, distance, FIRST_ROW_ROOM, near_radius,
+        near_index, near_distance,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -393,6 +461,40 @@ def filter_neighbours(
         i = active[a]
         _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, row_count[i])
     return row_count, index, distance
+
+
+@njit(cache=True, parallel=True)
+def near_neighbours(
+    neighbours: Neighbours, radius: float, index: np.ndarray, distance: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The entries of ``neighbours`` closer than ``radius`` (m), each row's in the order of
+    ``neighbours``: a sum over them is the same sum, bit for bit, as one over the whole row that
+    skips the entries at ``radius`` or beyond. Returns the arrays of :class:`Neighbours` in the
+    buffers ``index`` and ``distance`` (or new ones), like :func:`search_neighbours`.
+
+    The kernels whose radius is the number-density and gradient radius (2.1 l0) read this
+    list instead of the whole one, drawn at the Laplacian radius (3.1 l0 in 3-D, 4 l0 in 2-D):
+    a third of the entries, and no test on each that the processor mispredicts wherever the
+    particles are off their lattice (docs/performance.md, "Lists at the near radius"). Both
+    passes are free of such branches: rows are counted by adding the comparisons, and filled by
+    writing every entry at the next free slot, which moves on only for a near one."""
+    n = neighbours.start.shape[0] - 1
+    start = np.zeros(n + 1, dtype=np.int64)
+    for i in prange(n):
+        count = 0
+        for m in range(neighbours.start[i], neighbours.start[i + 1]):
+            count += neighbours.distance[m] < radius
+        start[i + 1] = count
+    for i in range(n):
+        start[i + 1] += start[i]
+    index = room(index, int(start[n]))
+    distance = room(distance, int(start[n]))
+    for i in prange(n):
+        _cut_row(
+            neighbours.indices, neighbours.distance, neighbours.start[i],
+            neighbours.start[i + 1], radius, index, distance, start[i], start[i + 1],
+        )  # fmt: skip
+    return start, index, distance
 
 
 @njit(cache=True, parallel=True)

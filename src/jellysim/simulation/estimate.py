@@ -499,6 +499,9 @@ def _fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[str,
     k = _neighbours(p, p.neighbour_radius)
     entry = INDEX + FLOAT
     lists = (start_rows + solid) * k * entry + 2 * (n + 1) * LONG
+    near = max(p.re_number_density, p.re_gradient)  # one list cut to it at a time (.near)
+    if near < p.neighbour_radius:
+        lists += max(start_rows, solid) * _neighbours(p, near) * entry + (n + 1) * LONG
     if p.neighbour_skin > 0.0:
         lists += solid * _neighbours(p, p.neighbour_radius + p.neighbour_skin) * entry
     # a wall's dummy neighbours (about half of them) have no entry in its row
