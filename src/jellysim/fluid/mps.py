@@ -629,13 +629,6 @@ class MPSSolver:
         surface = (  # the fluid particles on the free surface, for Eq. (F10b)
             self.alive & (self.kind == FLUID) & ~system.unknown if p.surface_repulsion else None
         )
-        if surface is None:
-            kernels.pressure_correction(
-                self.position, self.velocity, self.pressure, self.kind, self.alive,
-                system.near, self.constants, dt, self._position, self._velocity,
-                p.gradient == "corrected",
-            )  # fmt: skip
-            return
         kernels.pressure_correction(  # Eq. (F10b)'s normal reaches the Laplacian radius
             self.position, self.velocity, self.pressure, self.kind, self.alive,
             system.near, self.constants, dt, self._position, self._velocity,
