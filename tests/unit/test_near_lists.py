@@ -5,6 +5,8 @@ near radius")."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -119,3 +121,51 @@ def test_kernels_of_the_near_radius_give_the_same_bits_from_either_list(dim) -> 
     moved = checks["collisions"][0][1] != solver.velocity
     assert moved.any(), "some pairs collide"
     assert np.any(checks["corrected gradient"][0][1] != solver.velocity)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_verlet_cut_makes_the_whole_and_the_near_list_in_the_same_passes(dim) -> None:
+    """With a skin, the list at the search radius and its near list are cut together from the
+    Verlet list (neighbours.filter_with_near): the first holds the pairs of a fresh search, at
+    the same distances to the last bit, in the candidates' order; the second is the first cut
+    to the near radius (neighbours.near_neighbours), entry for entry."""
+    solver = _jittered_solver(dim)
+    skin = 0.4
+    solver = MPSSolver(
+        dataclasses.replace(solver.params, neighbour_skin=skin), solver.position, solver.kind
+    )
+    rows = solver.kind != DUMMY
+    solver.neighbours_and_near(rows, "start", "near")  # builds the Verlet list
+    candidates = solver._candidates
+    assert candidates is not None and solver.searches == 1
+    rng = np.random.default_rng(3)
+    step = rng.normal(size=solver.position.shape)
+    step *= 0.45 * skin * L0 / np.linalg.norm(step, axis=1, keepdims=True)
+    solver.position += step * (solver.kind == FLUID)[:, None]
+    solver.alive[rng.choice(np.flatnonzero(solver.kind == FLUID), size=4, replace=False)] = False
+    whole, near = solver.neighbours_and_near(rows & solver.alive, "start", "near")
+    assert solver.searches == 1  # cut from the same Verlet list
+    fresh = neighbours.neighbour_list(
+        solver.position, solver.alive, rows & solver.alive, solver.search_radius
+    )
+    assert np.array_equal(whole.start, fresh[0])
+    for i in range(len(rows)):
+        row = slice(whole.start[i], whole.start[i + 1])
+        got = dict(zip(whole.indices[row].tolist(), whole.distance[row].tolist(), strict=True))
+        want = dict(zip(fresh[1][row].tolist(), fresh[2][row].tolist(), strict=True))
+        assert got == want
+        order = list(candidates.indices[candidates.start[i] : candidates.start[i + 1]])
+        places = [order.index(j) for j in whole.indices[row]]
+        assert places == sorted(places)
+    tiny = [np.empty(3, dtype=np.int32), np.empty(3)]
+    cut = neighbours.near_neighbours(whole, solver.near_radius, *tiny)
+    assert 0 < cut[0][-1] < whole.start[-1]
+    assert np.array_equal(near.start, cut[0])
+    assert np.array_equal(near.indices, cut[1][: cut[0][-1]])
+    assert np.array_equal(near.distance, cut[2][: cut[0][-1]])
+    # the plain cut (filter_neighbours, neighbours) is the same whole list
+    plain = solver.neighbours(rows & solver.alive)
+    for a, b in zip(plain[:3], whole[:3], strict=True):
+        assert np.array_equal(a, b)
+    # the scratch is kept: a float for every candidate
+    assert solver._filter_scratch.size >= candidates.indices.size

@@ -36,7 +36,7 @@ from jellysim.fluid.geometry import DUMMY, FLUID, ROW_HEIGHT, WALL, check_lattic
 from jellysim.fluid.linalg import Matrix
 from jellysim.fluid.neighbours import (
     Neighbours,
-    filter_neighbours,
+    filter_with_near,
     largest_displacement,
     listed,
     near_neighbours,
@@ -461,6 +461,7 @@ class MPSSolver:
         self._candidates: Neighbours | None = None
         self._reference_position = np.empty_like(self.position)
         self._reference_alive = np.zeros(n, dtype=np.bool_)
+        self._filter_scratch = np.empty(0)  # a float per Verlet candidate (filter_with_near)
         self.searches = 0  # cell searches so far (neighbour lists built from scratch)
         # Buffers kept from step to step for the large arrays (fluid.neighbours.room): the lists
         # at r^k and r*, the Verlet list, the near list (r^k's until the collisions are done,
@@ -641,10 +642,8 @@ class MPSSolver:
         ``buffer`` in the solver's buffers of that name ("start" for the list at the start of a
         step, "star" for the one at r*), valid until the next list in the same buffers.
 
-        With ``neighbour_skin`` 0, a cell search. Otherwise cut from the Verlet list, which is
-        searched again (at the current positions, radius widened by the skin) when it is
-        missing or when a live particle has moved more than half the skin since it was built:
-        until then it holds every pair now closer than the radius."""
+        With ``neighbour_skin`` 0, a cell search. Otherwise cut from the Verlet list
+        (:meth:`_verlet_list`)."""
         p = self.params
         if p.neighbour_skin <= 0.0:
             self.searches += 1
@@ -655,47 +654,41 @@ class MPSSolver:
                 ),
                 self.search_radius,
             )
-        if (
-            self._candidates is None
-            or largest_displacement(self.position, self._reference_position, self.alive)
-            > 0.5 * p.neighbour_skin * p.l0
-        ):
-            self._reference_position[:] = self.position
-            self._reference_alive[:] = self.alive
-            self._build_candidates()
-        assert self._candidates is not None
-        return self._keep(
-            buffer,
-            filter_neighbours(
-                self._candidates,
-                self.position,
-                self.alive,
-                rows,
-                self.search_radius,
-                *self._buffer(buffer),
-            ),  # fmt: skip
-            self.search_radius,
-        )
+        lists = filter_with_near(
+            self._verlet_list(), self.position, self.alive, rows, self.search_radius,
+            *self._buffer(buffer), 0.0, *self._buffer(None), self._filter_scratch,
+        )  # fmt: skip
+        self._filter_scratch = lists[6]
+        return self._keep(buffer, lists[:3], self.search_radius)
 
     def neighbours_and_near(
         self, rows: np.ndarray, buffer: str | None = None, near_buffer: str | None = None
     ) -> tuple[Neighbours, Neighbours]:
         """:meth:`neighbours` and its entries within :attr:`near_radius` (:meth:`near`), in
         the buffers ``buffer`` and ``near_buffer`` (None: arrays of their own). A cell search
-        (``neighbour_skin`` 0) cuts the near list as it copies the rows to their place; a cut
-        from the Verlet list is cut again."""
-        if self.params.neighbour_skin > 0.0 or self.near_radius >= self.search_radius:
+        (``neighbour_skin`` 0) cuts the near list as it copies the rows to their place; the cut
+        from the Verlet list makes both lists in the same two passes
+        (:func:`~jellysim.fluid.neighbours.filter_with_near`)."""
+        if self.near_radius >= self.search_radius:
             whole = self.neighbours(rows, buffer)
             return whole, self.near(whole, near_buffer)
-        self.searches += 1
         index, distance = self._buffer(buffer)
         near_index, near_distance = self._buffer(near_buffer)
-        lists = search_with_near(
-            self.position, self.alive, rows, self.search_radius, index, distance,
-            self.near_radius, near_index, near_distance,
-        )  # fmt: skip
+        if self.params.neighbour_skin > 0.0:
+            lists = filter_with_near(
+                self._verlet_list(), self.position, self.alive, rows, self.search_radius,
+                index, distance, self.near_radius, near_index, near_distance,
+                self._filter_scratch,
+            )  # fmt: skip
+            self._filter_scratch = lists[6]
+        else:
+            self.searches += 1
+            lists = search_with_near(
+                self.position, self.alive, rows, self.search_radius, index, distance,
+                self.near_radius, near_index, near_distance,
+            )  # fmt: skip
         whole = self._keep(buffer, lists[:3], self.search_radius)
-        return whole, self._keep(near_buffer, lists[3:], self.near_radius)
+        return whole, self._keep(near_buffer, lists[3:6], self.near_radius)
 
     def near(self, neighbours: Neighbours, buffer: str | None = None) -> Neighbours:
         """The entries of ``neighbours`` within :attr:`near_radius`, in its order
@@ -723,6 +716,22 @@ class MPSSolver:
         if name is None:
             return [np.empty(0, dtype=np.int32), np.empty(0)]
         return self._buffers[name]
+
+    def _verlet_list(self) -> Neighbours:
+        """The Verlet list, searched again (at the current positions, the radius widened by
+        the skin) when it is missing or when a live particle has moved more than half the skin
+        since it was built: until then it holds every pair now closer than the radius."""
+        p = self.params
+        if (
+            self._candidates is None
+            or largest_displacement(self.position, self._reference_position, self.alive)
+            > 0.5 * p.neighbour_skin * p.l0
+        ):
+            self._reference_position[:] = self.position
+            self._reference_alive[:] = self.alive
+            self._build_candidates()
+        assert self._candidates is not None
+        return self._candidates
 
     def _build_candidates(self) -> None:
         """The Verlet list at the reference positions (a function of those and the reference

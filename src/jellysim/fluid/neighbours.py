@@ -389,40 +389,92 @@ def neighbour_list(
     return start, index[: start[-1]].copy(), distance[: start[-1]].copy()
 
 
-@njit(cache=True)
-def _filter_row(
-    i: int,
+@njit(cache=True, parallel=True)
+def filter_with_near(
     candidates: Neighbours,
-    x: np.ndarray,
-    y: np.ndarray,
-    z: np.ndarray,
+    position: np.ndarray,
     alive: np.ndarray,
-    radius2: float,
+    rows: np.ndarray,
+    radius: float,
     index: np.ndarray,
     distance: np.ndarray,
-    slot: int,
-) -> int:
-    """Row i of a candidate list cut to its live entries closer than sqrt(radius2), in the
-    candidates' order; counted only when ``slot`` < 0, else written from ``slot`` on."""
-    xi = x[i]
-    yi = y[i]
-    zi = z[i]
-    found = 0
-    for m in range(candidates.start[i], candidates.start[i + 1]):
-        j = candidates.indices[m]
-        dx = x[j] - xi
-        dy = y[j] - yi
-        dz = z[j] - zi
-        r2 = dx * dx + dy * dy + dz * dz
-        if r2 < radius2 and alive[j]:
-            if slot >= 0:
-                index[slot + found] = j
-                distance[slot + found] = math.sqrt(r2)
-            found += 1
-    return found
+    near_radius: float,
+    near_index: np.ndarray,
+    near_distance: np.ndarray,
+    scratch: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`filter_neighbours`' list and, in the same passes, its entries closer than
+    ``near_radius`` (m; 0 for none): the list :func:`near_neighbours` would cut from it. Returns
+    the arrays of both lists, in the buffers ``index``, ``distance``, ``near_index`` and
+    ``near_distance`` (or new ones), and the buffer ``scratch`` (or a new one), which holds a
+    float for every candidate.
+
+    Neither pass branches on a distance, which the processor would mispredict wherever the
+    particles are off their lattice: the first measures every candidate of a row into
+    ``scratch`` (its distance, or infinity for one that is not kept) and counts the row's
+    entries of both lists by adding comparisons; the second writes every candidate at the next
+    free slot of each list, which moves on only for an entry that list keeps. At moon-jelly's
+    size off the lattice, 71 ms on 2 threads where the filter of two passes with a branch and the
+    near cut after it took 125 (docs/performance.md, "A Verlet list without branches")."""
+    n, dim = position.shape
+    coordinates = np.zeros((3, n))
+    for i in prange(n):
+        for k in range(dim):
+            coordinates[k, i] = position[i, k]
+    x = coordinates[0]
+    y = coordinates[1]
+    z = coordinates[2]
+    active = np.flatnonzero(alive & rows)
+    radius2 = radius * radius
+    scratch = room(scratch, candidates.indices.shape[0])
+    start = np.zeros(n + 1, dtype=np.int64)
+    near_start = np.zeros(n + 1, dtype=np.int64)
+    for a in prange(active.shape[0]):  # first pass: measure and count each row
+        i = active[a]
+        xi = x[i]
+        yi = y[i]
+        zi = z[i]
+        found = 0
+        near = 0
+        for m in range(candidates.start[i], candidates.start[i + 1]):
+            j = candidates.indices[m]
+            dx = x[j] - xi
+            dy = y[j] - yi
+            dz = z[j] - zi
+            r2 = dx * dx + dy * dy + dz * dz
+            keep = (r2 < radius2) & alive[j]
+            r = math.sqrt(r2) if keep else math.inf
+            scratch[m] = r
+            found += keep
+            near += r < near_radius
+        start[i + 1] = found
+        near_start[i + 1] = near
+    for i in range(n):
+        start[i + 1] += start[i]
+        near_start[i + 1] += near_start[i]
+    index = room(index, int(start[n]))
+    distance = room(distance, int(start[n]))
+    near_index = room(near_index, int(near_start[n]))
+    near_distance = room(near_distance, int(near_start[n]))
+    for a in prange(active.shape[0]):  # second pass: fill each row of both lists
+        i = active[a]
+        slot, end = start[i], start[i + 1]
+        near_slot, near_end = near_start[i], near_start[i + 1]
+        for m in range(candidates.start[i], candidates.start[i + 1]):
+            j = candidates.indices[m]
+            r = scratch[m]
+            if slot < end:
+                index[slot] = j
+                distance[slot] = r
+            slot += r < math.inf
+            if near_slot < near_end:
+                near_index[near_slot] = j
+                near_distance[near_slot] = r
+            near_slot += r < near_radius
+    return start, index, distance, near_start, near_index, near_distance, scratch
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def filter_neighbours(
     candidates: Neighbours,
     position: np.ndarray,
@@ -437,30 +489,13 @@ def filter_neighbours(
     radius (a Verlet list: it holds every pair now closer than ``radius`` while no particle
     has moved more than half the difference of the radii since it was built). Within a row,
     the candidates' order. Returns the arrays of :class:`Neighbours` in the buffers ``index``
-    and ``distance`` (or new ones), like :func:`search_neighbours`; coordinates per axis as in
-    :func:`_scan_cells`."""
-    n, dim = position.shape
-    coordinates = np.zeros((3, n))
-    for i in prange(n):
-        for k in range(dim):
-            coordinates[k, i] = position[i, k]
-    x = coordinates[0]
-    y = coordinates[1]
-    z = coordinates[2]
-    active = np.flatnonzero(alive & rows)
-    radius2 = radius * radius
-    row_count = np.zeros(n + 1, dtype=np.int64)
-    for a in prange(active.shape[0]):  # first pass: count each row
-        i = active[a]
-        row_count[i + 1] = _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, -1)
-    for i in range(n):
-        row_count[i + 1] += row_count[i]
-    index = room(index, int(row_count[n]))
-    distance = room(distance, int(row_count[n]))
-    for a in prange(active.shape[0]):  # second pass: fill each row
-        i = active[a]
-        _filter_row(i, candidates, x, y, z, alive, radius2, index, distance, row_count[i])
-    return row_count, index, distance
+    and ``distance`` (or new ones), like :func:`search_neighbours`
+    (:func:`filter_with_near` without its near list, its scratch a new array)."""
+    lists = filter_with_near(
+        candidates, position, alive, rows, radius, index, distance, 0.0,
+        np.empty(0, dtype=np.int32), np.empty(0), np.empty(0),
+    )  # fmt: skip
+    return lists[0], lists[1], lists[2]
 
 
 @njit(cache=True, parallel=True)

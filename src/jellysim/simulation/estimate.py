@@ -502,8 +502,8 @@ def _fluid_memory(scene: Scene, plan: FluidPlan, counts: Particles) -> dict[str,
     near = max(p.re_number_density, p.re_gradient)  # one list cut to it at a time (.near)
     if near < p.neighbour_radius:
         lists += max(start_rows, solid) * _neighbours(p, near) * entry + (n + 1) * LONG
-    if p.neighbour_skin > 0.0:
-        lists += solid * _neighbours(p, p.neighbour_radius + p.neighbour_skin) * entry
+    if p.neighbour_skin > 0.0:  # the Verlet list and a float a candidate (filter_with_near)
+        lists += solid * _neighbours(p, p.neighbour_radius + p.neighbour_skin) * (entry + FLOAT)
     # a wall's dummy neighbours (about half of them) have no entry in its row
     nonzeros = (counts.fluid + 0.5 * counts.wetted) * (1 + _neighbours(p, p.laplacian_radius))
     orders = 1 if p.solver == "deflated" else 2  # neighbour order, and sorted for IC(0)
