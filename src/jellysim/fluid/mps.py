@@ -654,9 +654,11 @@ class MPSSolver:
                 ),
                 self.search_radius,
             )
+        index, distance = self._buffer(buffer)
+        no_index, no_distance = self._buffer(None)
         lists = filter_with_near(
             self._verlet_list(), self.position, self.alive, rows, self.search_radius,
-            *self._buffer(buffer), 0.0, *self._buffer(None), self._filter_scratch,
+            index, distance, 0.0, no_index, no_distance, self._filter_scratch,
         )  # fmt: skip
         self._filter_scratch = lists[6]
         return self._keep(buffer, lists[:3], self.search_radius)
@@ -675,20 +677,22 @@ class MPSSolver:
         index, distance = self._buffer(buffer)
         near_index, near_distance = self._buffer(near_buffer)
         if self.params.neighbour_skin > 0.0:
-            lists = filter_with_near(
+            filtered = filter_with_near(
                 self._verlet_list(), self.position, self.alive, rows, self.search_radius,
                 index, distance, self.near_radius, near_index, near_distance,
                 self._filter_scratch,
             )  # fmt: skip
-            self._filter_scratch = lists[6]
+            self._filter_scratch = filtered[6]
+            lists, near_lists = filtered[:3], filtered[3:6]
         else:
             self.searches += 1
-            lists = search_with_near(
+            searched = search_with_near(
                 self.position, self.alive, rows, self.search_radius, index, distance,
                 self.near_radius, near_index, near_distance,
             )  # fmt: skip
-        whole = self._keep(buffer, lists[:3], self.search_radius)
-        return whole, self._keep(near_buffer, lists[3:6], self.near_radius)
+            lists, near_lists = searched[:3], searched[3:]
+        whole = self._keep(buffer, lists, self.search_radius)
+        return whole, self._keep(near_buffer, near_lists, self.near_radius)
 
     def near(self, neighbours: Neighbours, buffer: str | None = None) -> Neighbours:
         """The entries of ``neighbours`` within :attr:`near_radius`, in its order
