@@ -458,19 +458,15 @@ def filter_with_near(
     near_distance = room(near_distance, int(near_start[n]))
     for a in prange(active.shape[0]):  # second pass: fill each row of both lists
         i = active[a]
-        slot, end = start[i], start[i + 1]
-        near_slot, near_end = near_start[i], near_start[i + 1]
-        for m in range(candidates.start[i], candidates.start[i + 1]):
-            j = candidates.indices[m]
-            r = scratch[m]
-            if slot < end:
-                index[slot] = j
-                distance[slot] = r
-            slot += r < math.inf
-            if near_slot < near_end:
-                near_index[near_slot] = j
-                near_distance[near_slot] = r
-            near_slot += r < near_radius
+        first, last = candidates.start[i], candidates.start[i + 1]
+        _cut_row(
+            candidates.indices, scratch, first, last, math.inf, index, distance, start[i],
+            start[i + 1],
+        )  # fmt: skip
+        _cut_row(
+            candidates.indices, scratch, first, last, near_radius, near_index, near_distance,
+            near_start[i], near_start[i + 1],
+        )  # fmt: skip
     return start, index, distance, near_start, near_index, near_distance, scratch
 
 
