@@ -87,7 +87,8 @@ def main() -> None:
         try:
             advance(simulation, args.from_frame, args.state)
         except InputError as error:
-            sys.exit(f"bench_moon.py: {error}")
+            print(f"bench_moon.py: {error}", file=sys.stderr)
+            sys.exit(2)  # bad input, as the command line's
     if args.steps:
         mps_steps(simulation, args.steps)
         return
