@@ -72,6 +72,9 @@ def main() -> None:
         parser.error("--from-frame must be positive, and --state needs it")
     numba.set_num_threads(args.threads)
     scene = jellysim.load_scene(args.preset, args.set)  # VALUEs read as TOML, as by --set
+    if args.from_frame >= scene.frame_count:  # frames 0 to frame_count - 1
+        last = scene.frame_count - 1
+        parser.error(f"--from-frame {args.from_frame}: {scene.name}'s last frame is {last}")
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores; numba {numba.__version__}, "
         f"threads {numba.get_num_threads()}"
@@ -183,8 +186,8 @@ def advance(simulation: jellysim.Simulation, frame: int, state: Path | None) -> 
 
 def mps_steps(simulation: jellysim.Simulation, count: int) -> None:
     """``count`` MPS steps of the water and the bell from the simulation's state (rest, or
-    ``--from-frame``), each of the stable dt, timed one by one (the springs apart), and the
-    bell's and the water's largest displacement since the first.
+    ``--from-frame``), each of the stable dt, timed one by one and by phase (the springs'
+    among them), and the bell's and the water's largest displacement since the first.
 
     Each step is one call of the coupling's ``advance`` to a time a hair short of a whole
     stable step ahead: to ``time + dt`` itself, rounding can leave the remainder a hair longer

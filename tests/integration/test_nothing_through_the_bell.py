@@ -127,7 +127,11 @@ def test_no_tentacle_through_a_soft_bell(name: str, tmp_path: Path) -> None:
 def test_the_fine_preset_at_the_test_scale_is_moon_jelly() -> None:
     fine = jellysim.load_scene("moon-jelly-fine", at_the_test_scale("moon-jelly-fine"))
     moon = jellysim.load_scene("moon-jelly", at_the_test_scale("moon-jelly"))
-    assert dataclasses.replace(fine, name=moon.name) == moon
+    # the one more difference: moon-jelly's Verlet skin, which the fine preset leaves at 0 (its
+    # lists would take twice the memory on the CPU); the same flow at round-off either way
+    assert (fine.fluid.neighbour_skin, moon.fluid.neighbour_skin) == (0.0, 0.3)
+    fluid = dataclasses.replace(fine.fluid, neighbour_skin=moon.fluid.neighbour_skin)
+    assert dataclasses.replace(fine, name=moon.name, fluid=fluid) == moon
 
 
 def test_the_real_size_fringe_stays_out_of_the_bell_through_a_contraction(tmp_path: Path) -> None:
