@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
 from scenes import SWIM, SWIM_PERIOD  # noqa: E402
 
 import jellysim  # noqa: E402
@@ -86,6 +87,8 @@ def main() -> None:
     parser.add_argument("--no-tentacles", action="store_true")
     parser.add_argument("--preset", default="moon-jelly")
     args = parser.parse_args()
+    if args.set and not args.full:
+        parser.error("--set changes the preset's own run: use it with --full")
     # the run's notices, among them its time per phase at the end (the springs' implicit solve,
     # the water's phases), as `jellysim run` shows them
     log_to_stderr()
@@ -123,4 +126,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -35,6 +35,7 @@ import time
 
 import numba
 import numpy as np
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
 
 import jellysim
 from jellysim.config.load import parse_override
@@ -198,4 +199,4 @@ def compare_precision(solver: MPSSolver, repeats: int) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -27,6 +27,7 @@ import tempfile
 import time
 
 import numba
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
 
 import jellysim
 from jellysim.config.load import parse_override
@@ -137,4 +138,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

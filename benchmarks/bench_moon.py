@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
 
 import jellysim
 from jellysim.config import scene_to_toml
@@ -87,11 +88,7 @@ def main() -> None:
     simulation.prepare()
     print(f"prepare: {time.perf_counter() - start:.2f} s")
     if args.from_frame:
-        try:
-            advance(simulation, args.from_frame, args.state)
-        except InputError as error:
-            print(f"bench_moon.py: {error}", file=sys.stderr)
-            sys.exit(2)  # bad input, as the command line's
+        advance(simulation, args.from_frame, args.state)  # another frame or scene: exit 2
     if args.steps:
         mps_steps(simulation, args.steps)
         return
@@ -222,4 +219,4 @@ def mps_steps(simulation: jellysim.Simulation, count: int) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
 
 import jellysim
 from jellysim.config.load import parse_override
@@ -188,4 +189,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

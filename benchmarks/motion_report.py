@@ -18,6 +18,8 @@ import argparse
 import time
 from pathlib import Path
 
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
+
 import jellysim
 from jellysim.io.motion import motion_by_group
 
@@ -74,4 +76,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)

@@ -24,6 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import scenes  # noqa: E402
+from _input import run_main  # benchmarks/: bad input in one line, exit 2
 
 import jellysim  # noqa: E402
 from jellysim.bell.swimming import swim_cycles  # noqa: E402
@@ -74,4 +75,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_main(main)
