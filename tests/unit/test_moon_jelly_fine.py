@@ -36,15 +36,19 @@ def carved(name: str) -> tuple[jellysim.Scene, BellShape, np.ndarray, np.ndarray
 
 
 def test_the_fine_preset_is_moon_jelly_at_a_third_of_its_spacing() -> None:
-    """Only the spacing, the spring constant and the run's length differ; the spring constant
-    keeps k / l0, and with it the network's Young's modulus E_eff = 19.7 k / l0
-    (docs/theory/soft-bell.md §2): the same material."""
+    """Only the spacing, the spring constant, the run's length and the CPU's neighbour lists
+    differ; the spring constant keeps k / l0, and with it the network's Young's modulus
+    E_eff = 19.7 k / l0 (docs/theory/soft-bell.md §2): the same material. The fine preset keeps
+    no Verlet skin (its lists would take twice the memory on the CPU), where moon-jelly keeps
+    0.3 l0: the same flow at round-off."""
     fine, moon = jellysim.load_scene(FINE), jellysim.load_scene("moon-jelly")
+    assert (fine.fluid.neighbour_skin, moon.fluid.neighbour_skin) == (0.0, 0.3)
     changed = {
         "name": FINE,
         "duration": fine.duration,
         "fluid.spacing": fine.fluid.spacing,
         "bell.spring_stiffness": fine.bell.spring_stiffness,
+        "fluid.neighbour_skin": fine.fluid.neighbour_skin,
     }
     assert jellysim.load_scene("moon-jelly", changed) == fine
     assert fine.fluid.spacing == pytest.approx(moon.fluid.spacing / 3, rel=1e-15)
