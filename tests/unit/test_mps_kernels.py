@@ -4,7 +4,11 @@ cell list against brute force, momentum of the explicit stage and the collision 
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 
+import numba
 import numpy as np
 import pytest
 
@@ -339,6 +343,7 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
             got = neighbours.search_in_waves(
                 position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
                 row_room, near_radius, np.full(size // 3, -1, np.int32), np.zeros(size // 3),
+                neighbours.WAVE_CHUNKS,
             )  # fmt: skip
             assert np.array_equal(got[0], start)
             assert np.array_equal(got[1][:total], reference[1])
@@ -363,6 +368,46 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
         row = slice(start[i], start[i + 1])
         assert reference[1][row].tolist() == expected.tolist()
         assert np.array_equal(reference[2][row], r[expected])
+
+
+def test_the_search_takes_waves_as_wide_as_the_threads_and_gives_the_same_list() -> None:
+    """A wave holds 32 chunks a thread, at least 64: one parallel loop pair per 2,048 rows on 1
+    and 2 threads, per 16,384 on 16 (NUMBA_NUM_THREADS=16 in a child process, whatever its
+    cores). Waves of 1, 7, 64 and 512 chunks (one wave for all the rows) give the same list to
+    the bit."""
+    assert neighbours.WAVE_CHUNKS == 64 and neighbours.WAVE_CHUNKS_PER_THREAD == 32
+    for threads in (1, 2):
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        assert neighbours.wave_chunks() == 64
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    code = "from jellysim.fluid import neighbours; print(neighbours.wave_chunks())"
+    child = subprocess.run(
+        [sys.executable, "-c", code], env={**os.environ, "NUMBA_NUM_THREADS": "16"},
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert child.stdout.split() == ["512"]
+    rng = np.random.default_rng(23)
+    n = 6000
+    position = rng.uniform(0.0, 1.0, (n, 3)) * np.array([1.0, 0.5, 0.4])
+    alive = rng.random(n) > 0.05
+    rows = rng.random(n) > 0.1
+    radius = 0.035
+    reference = neighbours.neighbour_list(position, alive, rows, radius)
+    near = neighbours.near_neighbours(
+        neighbours.Neighbours(*reference, radius), 0.6 * radius, np.empty(0, np.int32),
+        np.empty(0),
+    )  # fmt: skip
+    assert np.count_nonzero(alive & rows) > 2 * neighbours.SEARCH_CHUNK * 64  # several waves
+    for wave_size in (1, 7, 64, 512):
+        got = neighbours.search_with_near(
+            position, alive, rows, radius, np.empty(0, np.int32), np.empty(0), 0.6 * radius,
+            np.empty(0, np.int32), np.empty(0), wave_size,
+        )  # fmt: skip
+        for lists, expected in ((got[:3], reference), (got[3:], near)):
+            total = int(expected[0][-1])
+            assert 0 < total and np.array_equal(lists[0], expected[0])
+            assert np.array_equal(lists[1][:total], expected[1][:total])
+            assert np.array_equal(lists[2][:total], expected[2][:total])
 
 
 def test_the_fluid_kernels_fastmath_flags_are_linalgs() -> None:

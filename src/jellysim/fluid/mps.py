@@ -42,6 +42,7 @@ from jellysim.fluid.neighbours import (
     near_neighbours,
     search_neighbours,
     search_with_near,
+    wave_chunks,
 )
 from jellysim.fluid.poisson import assemble_poisson, number_unknowns
 from jellysim.fluid.probes import weighted_sums
@@ -647,10 +648,17 @@ class MPSSolver:
         p = self.params
         if p.neighbour_skin <= 0.0:
             self.searches += 1
+            index, distance = self._buffer(buffer)
             return self._keep(
                 buffer,
                 search_neighbours(
-                    self.position, self.alive, rows, self.search_radius, *self._buffer(buffer)
+                    self.position,
+                    self.alive,
+                    rows,
+                    self.search_radius,
+                    index,
+                    distance,
+                    wave_chunks(),
                 ),
                 self.search_radius,
             )
@@ -688,7 +696,7 @@ class MPSSolver:
             self.searches += 1
             searched = search_with_near(
                 self.position, self.alive, rows, self.search_radius, index, distance,
-                self.near_radius, near_index, near_distance,
+                self.near_radius, near_index, near_distance, wave_chunks(),
             )  # fmt: skip
             lists, near_lists = searched[:3], searched[3:]
         whole = self._keep(buffer, lists, self.search_radius)
@@ -744,6 +752,7 @@ class MPSSolver:
         radius = self.search_radius + p.neighbour_skin * p.l0
         self.searches += 1
         self._candidates = None  # its arrays are the buffers about to be overwritten
+        index, distance = self._buffers["candidates"]
         self._candidates = self._keep(
             "candidates",
             search_neighbours(
@@ -751,8 +760,10 @@ class MPSSolver:
                 self._reference_alive,
                 self.kind != DUMMY,
                 radius,
-                *self._buffers["candidates"],
-            ),  # fmt: skip
+                index,
+                distance,
+                wave_chunks(),
+            ),
             radius,
         )
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -199,11 +200,23 @@ def _cut_row(
 
 
 # The one-pass search (:func:`search_neighbours`) fills the rows in chunks of SEARCH_CHUNK rows,
-# each chunk's rows one after another in its own part of a scratch buffer, and WAVE_CHUNKS chunks
-# at a time (a wave): the wave's rows are counted as they are filled, then copied to their place
-# in the list. A chunk that outgrows its part is searched again straight into the list.
+# each chunk's rows one after another in its own part of a scratch buffer, and a wave of chunks
+# at a time: the wave's rows are counted as they are filled, then copied to their place in the
+# list. A chunk that outgrows its part is searched again straight into the list. A wave holds
+# WAVE_CHUNKS_PER_THREAD chunks for each thread, and at least WAVE_CHUNKS (:func:`wave_chunks`):
+# each thread's part of the scratch stays the size that fits its cache (about 2 MB in 3-D), and
+# the waves, each of two parallel loops, get fewer as the threads get more.
 SEARCH_CHUNK = 32
 WAVE_CHUNKS = 64
+WAVE_CHUNKS_PER_THREAD = 32
+
+
+def wave_chunks() -> int:
+    """The chunks of a wave of the search on the threads Numba uses now: 64 on 1 and 2 threads,
+    512 on 16 (the searches' ``wave_size``)."""
+    return max(WAVE_CHUNKS, WAVE_CHUNKS_PER_THREAD * numba.get_num_threads())
+
+
 # Entries a row the first wave's scratch holds; later waves' hold the widest chunk's mean so far,
 # a quarter more (the list is the same whatever these are: they only decide which path it takes).
 FIRST_ROW_ROOM = 64
@@ -232,10 +245,11 @@ def search_in_waves(
     near_radius: float,
     near_index: np.ndarray,
     near_distance: np.ndarray,
+    wave_size: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`search_with_near` with the first wave's scratch ``row_room`` entries a row (a
-    test's handle on the paths the search can take; the lists are the same whatever it is).
-    With ``near_radius`` 0 the near list is empty."""
+    """:func:`search_with_near` with the first wave's scratch ``row_room`` entries a row and
+    ``wave_size`` chunks a wave (a test's handles on the paths the search can take; the lists
+    are the same whatever they are). With ``near_radius`` 0 the near list is empty."""
     n = position.shape[0]
     cell, shape, stride, start, member, member_position, coordinates = _grid(
         position, alive, radius
@@ -251,12 +265,12 @@ def search_in_waves(
     offset = np.zeros(n_active + 1, dtype=np.int64)  # where it starts in the list
     near_offset = np.zeros(n_active + 1, dtype=np.int64)  # and in the near list
     chunks = (n_active + SEARCH_CHUNK - 1) // SEARCH_CHUNK
-    used = np.zeros(WAVE_CHUNKS, dtype=np.int64)  # entries of a chunk's rows, -1 if outgrown
+    used = np.zeros(wave_size, dtype=np.int64)  # entries of a chunk's rows, -1 if outgrown
     room_row = max(row_room, 1)
-    scratch_index = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row, dtype=np.int32)
-    scratch_distance = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row)
-    for first_chunk in range(0, chunks, WAVE_CHUNKS):
-        wave = min(WAVE_CHUNKS, chunks - first_chunk)
+    scratch_index = np.empty(wave_size * SEARCH_CHUNK * room_row, dtype=np.int32)
+    scratch_distance = np.empty(wave_size * SEARCH_CHUNK * room_row)
+    for first_chunk in range(0, chunks, wave_size):
+        wave = min(wave_size, chunks - first_chunk)
         part = SEARCH_CHUNK * room_row  # a chunk's part of the scratch
         for w in prange(wave):  # fill each chunk's rows into its part, counting them
             base = w * part
@@ -314,8 +328,8 @@ def search_in_waves(
         wider = (widest * 5 // 4 + SEARCH_CHUNK - 1) // SEARCH_CHUNK
         if wider > room_row:
             room_row = wider
-            scratch_index = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row, dtype=np.int32)
-            scratch_distance = np.empty(WAVE_CHUNKS * SEARCH_CHUNK * room_row)
+            scratch_index = np.empty(wave_size * SEARCH_CHUNK * room_row, dtype=np.int32)
+            scratch_distance = np.empty(wave_size * SEARCH_CHUNK * room_row)
     row_count = np.zeros(n + 1, dtype=np.int64)
     near_count = np.zeros(n + 1, dtype=np.int64)
     for a in range(n_active):
@@ -335,6 +349,7 @@ def search_neighbours(
     radius: float,
     index: np.ndarray,
     distance: np.ndarray,
+    wave_size: int = WAVE_CHUNKS,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cell-list search: for every live particle i with ``rows[i]`` ((N,) bool), all live
     particles closer than ``radius`` (m); other rows are empty (such particles still appear as
@@ -342,8 +357,9 @@ def search_neighbours(
 
     Cells of side ``radius / CELLS_PER_RADIUS`` (:func:`_grid`); particle i scans the cells
     within ``CELLS_PER_RADIUS`` of its own along each axis, once: the rows are filled and
-    counted in chunks (:data:`SEARCH_CHUNK`), a wave of chunks at a time, then copied to their
-    place (a count pass before the fill took half the search, docs/performance.md). Returns the
+    counted in chunks (:data:`SEARCH_CHUNK`), a wave of ``wave_size`` chunks at a time (the
+    solver passes :func:`wave_chunks`), then copied to their place (a count pass before the
+    fill took half the search, docs/performance.md). Returns the
     arrays of :class:`Neighbours` ``(start, indices, distance)``; within a row the order is fixed
     (cell order, then particle index). ``indices`` and ``distance`` are the buffers ``index``
     ((K,) int32) and ``distance`` ((K,) float64) when they hold the list, else new ones, and run
@@ -351,7 +367,7 @@ def search_neighbours(
     """
     start, index, distance, _, _, _ = search_in_waves(
         position, alive, rows, radius, index, distance, FIRST_ROW_ROOM, 0.0,
-        np.empty(0, dtype=np.int32), np.empty(0),
+        np.empty(0, dtype=np.int32), np.empty(0), wave_size,
     )  # fmt: skip
     return start, index, distance
 
@@ -367,6 +383,7 @@ def search_with_near(
     near_radius: float,
     near_index: np.ndarray,
     near_distance: np.ndarray,
+    wave_size: int = WAVE_CHUNKS,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`search_neighbours`, and the same list cut to ``near_radius`` (m) as
     :func:`near_neighbours` cuts it, taken as the rows are copied to their place (no second
@@ -374,7 +391,7 @@ def search_with_near(
     ``near_distance`` (or new ones)."""
     return search_in_waves(
         position, alive, rows, radius, index, distance, FIRST_ROW_ROOM, near_radius,
-        near_index, near_distance,
+        near_index, near_distance, wave_size,
     )  # fmt: skip
 
 
