@@ -371,21 +371,22 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
 
 
 def test_the_search_takes_waves_as_wide_as_the_threads_and_gives_the_same_list() -> None:
-    """A wave holds 32 chunks a thread, at least 64: one parallel loop pair per 2,048 rows on 1
-    and 2 threads, per 16,384 on 16 (NUMBA_NUM_THREADS=16 in a child process, whatever its
-    cores). Waves of 1, 7, 64 and 512 chunks (one wave for all the rows) give the same list to
-    the bit."""
+    """A wave holds 32 chunks a thread, at least 64 and at most 1,024: one parallel loop pair
+    per 2,048 rows on 1 and 2 threads, per 16,384 on 16 (NUMBA_NUM_THREADS in a child process,
+    whatever its cores). Waves of 1, 7, 64 and 512 chunks (one wave for all the rows) give the
+    same list to the bit."""
     assert neighbours.WAVE_CHUNKS == 64 and neighbours.WAVE_CHUNKS_PER_THREAD == 32
     for threads in (1, 2):
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         assert neighbours.wave_chunks() == 64
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     code = "from jellysim.fluid import neighbours; print(neighbours.wave_chunks())"
-    child = subprocess.run(
-        [sys.executable, "-c", code], env={**os.environ, "NUMBA_NUM_THREADS": "16"},
-        capture_output=True, text=True, check=True,
-    )  # fmt: skip
-    assert child.stdout.split() == ["512"]
+    for threads, chunks in ((16, "512"), (64, "1024")):  # at most 1,024 (32,768 rows)
+        child = subprocess.run(
+            [sys.executable, "-c", code], env={**os.environ, "NUMBA_NUM_THREADS": str(threads)},
+            capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        assert child.stdout.split() == [chunks]
     rng = np.random.default_rng(23)
     n = 6000
     position = rng.uniform(0.0, 1.0, (n, 3)) * np.array([1.0, 0.5, 0.4])

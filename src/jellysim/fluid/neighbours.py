@@ -203,18 +203,21 @@ def _cut_row(
 # each chunk's rows one after another in its own part of a scratch buffer, and a wave of chunks
 # at a time: the wave's rows are counted as they are filled, then copied to their place in the
 # list. A chunk that outgrows its part is searched again straight into the list. A wave holds
-# WAVE_CHUNKS_PER_THREAD chunks for each thread, and at least WAVE_CHUNKS (:func:`wave_chunks`):
-# each thread's part of the scratch stays the size that fits its cache (about 2 MB in 3-D), and
-# the waves, each of two parallel loops, get fewer as the threads get more.
+# WAVE_CHUNKS_PER_THREAD chunks for each thread, at least WAVE_CHUNKS and at most
+# WAVE_CHUNKS_MOST (:func:`wave_chunks`): each thread's part of the scratch stays the size that
+# fits its cache (about 2 MB in 3-D), and the waves, each of two parallel loops, get fewer as
+# the threads get more; the scratch stays within about 100 MB in 3-D on any machine.
 SEARCH_CHUNK = 32
 WAVE_CHUNKS = 64
 WAVE_CHUNKS_PER_THREAD = 32
+WAVE_CHUNKS_MOST = 1024
 
 
 def wave_chunks() -> int:
     """The chunks of a wave of the search on the threads Numba uses now: 64 on 1 and 2 threads,
-    512 on 16 (the searches' ``wave_size``)."""
-    return max(WAVE_CHUNKS, WAVE_CHUNKS_PER_THREAD * numba.get_num_threads())
+    512 on 16, 1,024 from 32 on (the searches' ``wave_size``)."""
+    wanted = WAVE_CHUNKS_PER_THREAD * numba.get_num_threads()
+    return min(max(WAVE_CHUNKS, wanted), WAVE_CHUNKS_MOST)
 
 
 # Entries a row the first wave's scratch holds; later waves' hold the widest chunk's mean so far,
