@@ -9,7 +9,9 @@
 #   moon-jelly the moon-jelly preset's bell and water (no tentacles) for three pulses on the GPU
 #              (issue 28's 30 s), the springs on the GPU; per pulse contraction and rise
 #   spheric    SPHERIC Test 2 at 1,121,729 fluid particles, its pressure probes read each step
-#   threads    the 3-D tank's CPU step on 16, 8, 4, 2 and 1 threads (bench_fluid.py)
+#   threads    the 3-D tank's CPU step on 16, 8, 4, 2 and 1 threads (bench_fluid.py); with
+#              BASELINE, that package's on 16 and 1; the parallel regions a step and one's
+#              cost on 16 threads (parallel_regions.py, where a C compiler is)
 #   dam-break  dam-break-2d run on the GPU and plotted against Martin & Moyce
 #   warm       dam-break-2d on the GPU twice with a new NUMBA_CACHE_DIR: a machine's first run
 #              (every kernel compiled, the CPU's too) against a later one (all from the cache)
@@ -61,7 +63,15 @@ for part in $parts; do
       for precision in ${THREAD_PRECISIONS-double}; do
       for threads in ${THREADS-16 8 4 2 1}; do
         timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads --chunksize ${CHUNKSIZE-0} --set fluid.matrix_precision=$precision 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/$threads threads, $precision: /" | tee -a "$out/log"
-      done; done ;;
+      done; done
+      if [ -d "${BASELINE-}/src/jellysim" ]; then  # the same cores on the baseline package
+        for threads in 16 1; do
+          PYTHONPATH="$(cd "$BASELINE" && pwd)/src:${PYTHONPATH-}" timeout 50 $py benchmarks/bench_fluid.py --case tank-3d --steps 5 --threads $threads 2>&1 | grep -E "steps/s|Error" | tail -1 | sed "s/^/baseline, $threads threads: /" | tee -a "$out/log"
+        done
+      fi
+      if command -v cc >/dev/null || command -v gcc >/dev/null; then  # regions a step, and one's cost
+        timeout 60 $py benchmarks/parallel_regions.py --threads 16 --steps 3 2>&1 | sed -n '1p;$p' | tee -a "$out/log"
+      fi ;;
     dam-break)
       say "== jellysim run dam-break-2d --device cuda"
       ( time timeout 80 $py -m jellysim run dam-break-2d --device cuda --out /tmp/db2d --force ) 2>&1 | tail -8 | tee -a "$out/log"
