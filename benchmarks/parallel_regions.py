@@ -57,6 +57,12 @@ def main() -> None:
     args = parser.parse_args()
     if args.steps < 1 or args.threads < 1:
         parser.error("--steps and --threads must be at least 1")
+    from bench_fluid import CASES  # benchmarks/
+
+    from jellysim.errors import InputError
+
+    if args.case not in CASES:
+        raise InputError(f"unknown case {args.case!r} (one of {', '.join(CASES)})")
     if LIBRARY not in os.environ:
         relaunch(args)
         return
@@ -99,14 +105,11 @@ def count_regions(args: argparse.Namespace) -> None:
     import jellysim  # first: jellysim's threading layer and wait policy
     import jellysim.fluid
     from jellysim.config.load import parse_override
-    from jellysim.errors import InputError
     from jellysim.simulation.fluid import FluidSimulation
 
     counter = ctypes.CDLL(os.environ[LIBRARY])
     counter.parallel_regions.restype = ctypes.c_ulong
     numba.set_num_threads(args.threads)
-    if args.case not in CASES:
-        raise InputError(f"unknown case {args.case!r} (one of {', '.join(CASES)})")
     preset, overrides = CASES[args.case]
     overrides = {**overrides, **dict(parse_override(item) for item in args.set)}
     solver = FluidSimulation(jellysim.load_scene(preset, overrides)).solver
@@ -128,7 +131,11 @@ def count_regions(args: argparse.Namespace) -> None:
 
         return call
 
-    for module in modules:  # the kernels called from Python; compiled callers keep their own
+    # The kernels called from Python, each replaced in its module by a counting wrapper. A
+    # compiled kernel that calls another keeps its own reference; one compiled for the first
+    # time from here on would find a wrapper and fail to type, so the first step above, before
+    # the wrapping, has compiled (or loaded) every kernel the steps use.
+    for module in modules:
         for name, value in list(vars(module).items()):
             if isinstance(value, CPUDispatcher):
                 label = f"{value.__module__.rsplit('.', 1)[-1]}.{name}"

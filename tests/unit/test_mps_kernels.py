@@ -3,6 +3,7 @@ cell list against brute force, momentum of the explicit stage and the collision 
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import subprocess
@@ -288,18 +289,24 @@ def test_search_writes_into_a_buffer_that_holds_the_list_and_grows_one_that_does
         assert index.size >= total
 
 
-def _outgrown_chunks(start: np.ndarray, active: np.ndarray, row_room: int) -> list[int]:
+def _outgrown_chunks(
+    start: np.ndarray, active: np.ndarray, row_room: int, wave_size: int = 64
+) -> list[int]:
     """How many chunks of each wave outgrow their part of the scratch in
-    :func:`neighbours.search_in_waves` with the first wave's room ``row_room`` (its rule, from
-    the list's row lengths): the test's check that it drives the paths it names."""
-    chunk, wave = neighbours.SEARCH_CHUNK, neighbours.WAVE_CHUNKS
+    :func:`neighbours.search_in_waves` with the first wave's room ``row_room`` and waves of
+    ``wave_size`` chunks, the first at most WAVE_CHUNKS (its rule, from the list's row lengths):
+    the test's check that it drives the paths it names."""
+    chunk = neighbours.SEARCH_CHUNK
     widths = np.diff(start)[active]
     totals = np.add.reduceat(widths, np.arange(0, widths.size, chunk))
-    room, outgrown = max(row_room, 1), []
-    for first in range(0, totals.size, wave):
+    room, outgrown, first = max(row_room, 1), [], 0
+    wave = min(wave_size, neighbours.WAVE_CHUNKS)
+    while first < totals.size:
         in_wave = totals[first : first + wave]
         outgrown.append(int(np.sum(in_wave > chunk * room)))
         room = max(room, (int(in_wave.max()) * 5 // 4 + chunk - 1) // chunk)
+        first += wave
+        wave = wave_size
     return outgrown
 
 
@@ -338,19 +345,26 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
     )  # fmt: skip
     near_total = int(near[0][-1])
     assert 0 < near_total < total
-    for row_room in (0, 4, neighbours.FIRST_ROW_ROOM, 10_000):
-        for size in (0, first_wave // 2, first_wave + 10, 2 * total):
-            got = neighbours.search_in_waves(
-                position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
-                row_room, near_radius, np.full(size // 3, -1, np.int32), np.zeros(size // 3),
-                neighbours.WAVE_CHUNKS,
-            )  # fmt: skip
-            assert np.array_equal(got[0], start)
-            assert np.array_equal(got[1][:total], reference[1])
-            assert np.array_equal(got[2][:total], reference[2])
-            assert np.array_equal(got[3], near[0])
-            assert np.array_equal(got[4][:near_total], near[1][:near_total])
-            assert np.array_equal(got[5][:near_total], near[2][:near_total])
+    # waves of 7 chunks (the first 7), of 64 (the solver's on 1-2 threads) and of 512 (the
+    # first 64, the rest in one wave, its chunks outgrowing after the room was learned)
+    assert _outgrown_chunks(start, active, neighbours.FIRST_ROW_ROOM, 512)[-1] > 0
+    assert len(_outgrown_chunks(start, active, 0, 512)) == 2
+    for row_room, size, wave_size in itertools.product(
+        (0, 4, neighbours.FIRST_ROW_ROOM, 10_000),
+        (0, first_wave // 2, first_wave + 10, 2 * total),
+        (7, neighbours.WAVE_CHUNKS, 512),
+    ):
+        got = neighbours.search_in_waves(
+            position, alive, rows, radius, np.full(size, -1, np.int32), np.zeros(size),
+            row_room, near_radius, np.full(size // 3, -1, np.int32), np.zeros(size // 3),
+            wave_size,
+        )  # fmt: skip
+        assert np.array_equal(got[0], start)
+        assert np.array_equal(got[1][:total], reference[1])
+        assert np.array_equal(got[2][:total], reference[2])
+        assert np.array_equal(got[3], near[0])
+        assert np.array_equal(got[4][:near_total], near[1][:near_total])
+        assert np.array_equal(got[5][:near_total], near[2][:near_total])
     # the order and the distances, by the grid's own rule (cells radius / CELLS_PER_RADIUS
     # wide from the live particles' lowest corner)
     live = position[alive]
@@ -371,8 +385,8 @@ def test_one_pass_search_gives_the_same_list_whichever_path_its_rows_take(dim: i
 
 
 def test_the_search_takes_waves_as_wide_as_the_threads_and_gives_the_same_list() -> None:
-    """A wave holds 32 chunks a thread, at least 64 and at most 1,024: one parallel loop pair
-    per 2,048 rows on 1 and 2 threads, per 16,384 on 16 (NUMBA_NUM_THREADS in a child process,
+    """A wave holds 32 chunks a thread, at least 64 and at most 512: one parallel loop pair per
+    2,048 rows on 1 and 2 threads, per 16,384 from 16 on (NUMBA_NUM_THREADS in a child process,
     whatever its cores). Waves of 1, 7, 64 and 512 chunks (one wave for all the rows) give the
     same list to the bit."""
     assert neighbours.WAVE_CHUNKS == 64 and neighbours.WAVE_CHUNKS_PER_THREAD == 32
@@ -381,7 +395,7 @@ def test_the_search_takes_waves_as_wide_as_the_threads_and_gives_the_same_list()
         assert neighbours.wave_chunks() == 64
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     code = "from jellysim.fluid import neighbours; print(neighbours.wave_chunks())"
-    for threads, chunks in ((16, "512"), (64, "1024")):  # at most 1,024 (32,768 rows)
+    for threads, chunks in ((16, "512"), (64, "512")):  # at most 512 (16,384 rows)
         child = subprocess.run(
             [sys.executable, "-c", code], env={**os.environ, "NUMBA_NUM_THREADS": str(threads)},
             capture_output=True, text=True, check=True,

@@ -172,6 +172,28 @@ def test_aggregates_and_members_are_numpys_sorts_without_sorting(monkeypatch) ->
         np.testing.assert_array_equal(np.diff(start), np.bincount(key, minlength=m))
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_aggregates_are_numpys_cells_below_the_origin_and_on_cell_edges(dim: int) -> None:
+    """The compiled numbering against NumPy's floor, bounds and np.ravel_multi_index: rows below
+    and above the lattice's origin, some exactly on cell edges (floor of a whole number), in 2-D
+    and 3-D; a lone row is aggregate 0 of 1."""
+    rng = np.random.default_rng(dim)
+    size = 0.25
+    origin = np.array([0.1, -0.3, 0.05][:dim])
+    position = rng.uniform(-1.3, 0.9, (2000, dim))
+    position[:300] = origin + size * rng.integers(-5, 4, (300, dim))  # on the edges
+    key, m = deflation.aggregates(position, origin, size)
+    cell = np.floor((position - origin) / size).astype(np.int64)
+    assert cell.min() < 0 and np.any((position[:300] - origin) / size % 1.0 == 0.0)
+    cell -= cell.min(axis=0)
+    linear = np.ravel_multi_index(tuple(cell.T), tuple(cell.max(axis=0) + 1))
+    unique, inverse = np.unique(linear, return_inverse=True)
+    np.testing.assert_array_equal(key, inverse.ravel())
+    assert m == unique.size
+    lone = deflation.aggregates(position[:1], origin, size)
+    assert lone[1] == 1 and lone[0].tolist() == [0]
+
+
 def test_the_deflated_solvers_unsorted_matrix_is_the_same_matrix() -> None:
     """Assembled for the deflated solver the rows keep neighbour order (diagonal first); as a
     matrix it is the sorted one, entry for entry."""

@@ -56,6 +56,8 @@ def aggregates(position: np.ndarray, origin: np.ndarray, size: float) -> tuple[n
         return np.zeros(0, dtype=np.int64), 0
     linear, shape = _linear_cells(position, origin, size)
     cells = math.prod(int(extent) for extent in shape)
+    if min(shape) < 1 or cells >= 2**63:  # wrapped: a position not finite or a spread too wide
+        raise ValueError(f"aggregates: rows spread over {cells} cells of {size} m")
     if cells <= _DENSE_CELLS * position.shape[0] + 4096:
         return _numbered_cells(linear, cells)
     _, key = np.unique(linear, return_inverse=True)  # a sparse spread: sort instead
@@ -70,9 +72,8 @@ def _linear_cells(
     """The lattice cell of each row of ``position`` ((n, D), n > 0) as NumPy's
     ``np.ravel_multi_index`` numbers it in the box of the occupied cells (C order: the last
     axis fastest), and the box's shape ((D,) int64): the cells ``floor((x - origin) / size)``
-    and their bounds in one pass, then the numbers. Serial: in parallel it was no faster on 1
-    and 2 threads (0.7-1.1 ms at 63,561 rows), and NumPy's array operations and strided bounds
-    took 4-5 ms."""
+    and their bounds in one pass, then the numbers; serial (docs/performance.md, "Parallel
+    regions a step"). Positions must be finite."""
     n, dim = position.shape
     cell = np.empty((n, dim), dtype=np.int64)
     lower = np.full(dim, np.iinfo(np.int64).max)

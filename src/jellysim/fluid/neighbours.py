@@ -204,18 +204,19 @@ def _cut_row(
 # at a time: the wave's rows are counted as they are filled, then copied to their place in the
 # list. A chunk that outgrows its part is searched again straight into the list. A wave holds
 # WAVE_CHUNKS_PER_THREAD chunks for each thread, at least WAVE_CHUNKS and at most
-# WAVE_CHUNKS_MOST (:func:`wave_chunks`): each thread's part of the scratch stays the size that
-# fits its cache (about 2 MB in 3-D), and the waves, each of two parallel loops, get fewer as
-# the threads get more; the scratch stays within about 100 MB in 3-D on any machine.
+# WAVE_CHUNKS_MOST (:func:`wave_chunks`), but the first, which learns how long the rows are,
+# WAVE_CHUNKS: each thread's part of the scratch stays the size that fits its cache (about 2 MB
+# in 3-D), and the waves, each of two parallel loops, get fewer as the threads get more; each
+# scratch array stays within about 32 MB in 3-D, which glibc serves from its heap.
 SEARCH_CHUNK = 32
 WAVE_CHUNKS = 64
 WAVE_CHUNKS_PER_THREAD = 32
-WAVE_CHUNKS_MOST = 1024
+WAVE_CHUNKS_MOST = 512
 
 
 def wave_chunks() -> int:
     """The chunks of a wave of the search on the threads Numba uses now: 64 on 1 and 2 threads,
-    512 on 16, 1,024 from 32 on (the searches' ``wave_size``)."""
+    512 from 16 on (the searches' ``wave_size``)."""
     wanted = WAVE_CHUNKS_PER_THREAD * numba.get_num_threads()
     return min(max(WAVE_CHUNKS, wanted), WAVE_CHUNKS_MOST)
 
@@ -268,12 +269,16 @@ def search_in_waves(
     offset = np.zeros(n_active + 1, dtype=np.int64)  # where it starts in the list
     near_offset = np.zeros(n_active + 1, dtype=np.int64)  # and in the near list
     chunks = (n_active + SEARCH_CHUNK - 1) // SEARCH_CHUNK
+    wave_size = max(min(wave_size, chunks), 1)
     used = np.zeros(wave_size, dtype=np.int64)  # entries of a chunk's rows, -1 if outgrown
     room_row = max(row_room, 1)
-    scratch_index = np.empty(wave_size * SEARCH_CHUNK * room_row, dtype=np.int32)
-    scratch_distance = np.empty(wave_size * SEARCH_CHUNK * room_row)
-    for first_chunk in range(0, chunks, wave_size):
-        wave = min(wave_size, chunks - first_chunk)
+    # The first wave, which learns the rows' room (a chunk that outgrows its part is searched
+    # twice), is never wider than WAVE_CHUNKS; the later ones are wave_size wide.
+    wave = min(wave_size, WAVE_CHUNKS, chunks)
+    scratch_index = np.empty(wave * SEARCH_CHUNK * room_row, dtype=np.int32)
+    scratch_distance = np.empty(wave * SEARCH_CHUNK * room_row)
+    first_chunk = 0
+    while first_chunk < chunks:
         part = SEARCH_CHUNK * room_row  # a chunk's part of the scratch
         for w in prange(wave):  # fill each chunk's rows into its part, counting them
             base = w * part
@@ -328,11 +333,12 @@ def search_in_waves(
                         index, distance, offset[a], offset[a + 1], near_radius, near_index,
                         near_distance, near_offset[a], near_offset[a + 1],
                     )  # fmt: skip
-        wider = (widest * 5 // 4 + SEARCH_CHUNK - 1) // SEARCH_CHUNK
-        if wider > room_row:
-            room_row = wider
-            scratch_index = np.empty(wave_size * SEARCH_CHUNK * room_row, dtype=np.int32)
-            scratch_distance = np.empty(wave_size * SEARCH_CHUNK * room_row)
+        first_chunk += wave
+        wave = min(wave_size, chunks - first_chunk)
+        room_row = max(room_row, (widest * 5 // 4 + SEARCH_CHUNK - 1) // SEARCH_CHUNK)
+        if wave * SEARCH_CHUNK * room_row > scratch_index.shape[0]:
+            scratch_index = np.empty(wave * SEARCH_CHUNK * room_row, dtype=np.int32)
+            scratch_distance = np.empty(wave * SEARCH_CHUNK * room_row)
     row_count = np.zeros(n + 1, dtype=np.int64)
     near_count = np.zeros(n + 1, dtype=np.int64)
     for a in range(n_active):
