@@ -55,3 +55,33 @@ def test_small_launch_grids_do_not_warn() -> None:
             )
         warnings.warn("another warning", numba_errors.NumbaPerformanceWarning, stacklevel=1)
     assert [str(w.message) for w in caught] == ["another warning"]
+
+
+@pytest.mark.parametrize("quiet", [None, False, True])
+def test_asking_a_scene_without_water_for_the_gpu_says_it_runs_on_the_cpu(
+    quiet, caplog: pytest.LogCaptureFixture, tmp_path
+) -> None:
+    """`jellysim run brown-jelly --device cuda`: brown-jelly has no MPS water, so nothing goes
+    to the GPU; the run goes on on the CPU (no GPU needed) and says so in one line, unless
+    quiet."""
+    import jellysim
+    from jellysim.simulation.run import device_notice
+
+    scene = jellysim.load_scene("brown-jelly", {"duration": 0.05, "fluid.device": "cuda"})
+    expected = device_notice(scene)
+    assert expected is not None and expected.startswith("brown-jelly: fluid.device = 'cuda'")
+    assert "fluid.model = 'none'" in expected
+    assert device_notice(jellysim.load_scene("brown-jelly")) is None  # the CPU, as asked
+    with caplog.at_level(logging.INFO, logger="jellysim"):
+        with jellysim.run(scene, tmp_path / "out", quiet=quiet) as result:
+            assert result.frames == scene.frame_count
+    said = [r for r in caplog.records if r.getMessage() == expected]
+    assert [r.levelno for r in said] == ([] if quiet is True else [logging.WARNING])
+
+
+@pytest.mark.parametrize("preset", ["dam-break-2d", "moon-jelly"])
+def test_a_scene_with_water_on_the_gpu_gets_no_such_notice(preset) -> None:
+    import jellysim
+    from jellysim.simulation.run import device_notice
+
+    assert device_notice(jellysim.load_scene(preset, {"fluid.device": "cuda"})) is None

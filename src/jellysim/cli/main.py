@@ -71,7 +71,7 @@ def _parser() -> argparse.ArgumentParser:
         "--device",
         choices=("cpu", "cuda"),
         help="where the fluid is stepped (the same as --set fluid.device=...): 'cuda' for an "
-        "NVIDIA GPU",
+        "NVIDIA GPU (a scene without MPS water runs on the CPU either way)",
     )
     run.add_argument("--resume", action="store_true", help="continue a killed run")
     run.add_argument("--force", action="store_true", help="replace an existing result")

@@ -48,6 +48,26 @@ COMPILE_NOTICE = (
 )
 
 
+# fluid.device = "cuda" moves the MPS water (and a soft bell's springs in it) to the GPU; the
+# tentacles and an animated bell always step on the CPU. A scene without MPS water therefore
+# has nothing to put on the GPU: it runs as on the CPU, and one line says so rather than let
+# `--device cuda` look as if it had been obeyed (docs/decisions.md, "--device cuda without
+# water").
+DEVICE_NOTICE = (
+    "{name}: fluid.device = 'cuda' has nothing to run on the GPU: the scene has no MPS water "
+    "(fluid.model = '{model}'; only the water and a soft bell in it step on the GPU), so its "
+    "tentacles and bell step on the CPU"
+)
+
+
+def device_notice(scene: Scene) -> str | None:
+    """:data:`DEVICE_NOTICE` for ``scene`` where it asks for the GPU but has no MPS water,
+    else None."""
+    if scene.fluid.device == "cuda" and scene.fluid.model != "mps":
+        return DEVICE_NOTICE.format(name=scene.name, model=scene.fluid.model)
+    return None
+
+
 def default_out(scene: Scene) -> Path:
     return Path("out") / scene.name
 
@@ -133,6 +153,9 @@ def run(
         raise InputError(f"nothing to resume in '{folder}': no {RESULT_FILE}")
 
     check_writable(folder)
+    notice = device_notice(scene)
+    if notice is not None and quiet is not True:
+        log.warning(notice)
     replaced = result_path.stat().st_size if result_path.is_file() else 0  # or continued
     check_costs(scene, folder, reclaimed=replaced, quiet=quiet is not False, enforce=estimate_check)
     # From here a stop signal ends the run at the next frame boundary (setting up included).
